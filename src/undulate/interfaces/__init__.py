@@ -1,0 +1,1 @@
+"""Interfaces stage: command line and Python API."""

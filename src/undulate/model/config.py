@@ -1,0 +1,269 @@
+"""Validated description of one simulation case.
+
+Units everywhere in undulate: lengths in mm, moduli and stresses in MPa (= N/mm^2), forces in N,
+energies in N*mm (= mJ), times in s, densities in t/mm^3 (so that N = t*mm/s^2).
+
+A case is a pre-stretched fabric with rods printed on it. The coordinates of rods are given in
+the *printed* configuration, i.e. on the fabric while it is stretched by ``eps0`` along x, with
+the origin at the centre of the fabric. Rod lengths ``L`` are printed lengths.
+
+Every model is strict: unknown keys, NaN/inf and out-of-range values raise a
+:class:`pydantic.ValidationError` whose message names the field and the allowed range.
+:func:`load_case` turns that into a one-line-per-problem :class:`ConfigError`.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = [
+    "Fabric",
+    "Rods",
+    "Segment",
+    "Release",
+    "Imperfection",
+    "MeshOptions",
+    "SolverOptions",
+    "Dynamics",
+    "Case",
+    "ConfigError",
+    "load_case",
+    "case_from_dict",
+]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+
+
+PosFloat = Annotated[float, Field(gt=0.0)]
+
+
+class Fabric(_Strict):
+    """The knitted textile, modelled as an isotropic hyperelastic sheet."""
+
+    E: float = Field(0.45, gt=0.0, le=1e4, description="Young's modulus [MPa]")
+    nu: float = Field(0.3, ge=0.0, lt=0.5, description="Poisson ratio [-]")
+    t: float = Field(0.4, gt=0.0, le=20.0, description="thickness [mm]")
+    rho: float = Field(1.2e-9, gt=0.0, description="density [t/mm^3] (inertial mode only)")
+    margin_x: float = Field(
+        20.0, ge=2.0, le=1e4, description="fabric beyond the rod ends along x, printed state [mm]"
+    )
+    margin_y: float = Field(
+        20.0, ge=2.0, le=1e4, description="fabric beyond the outer rods along y, printed state [mm]"
+    )
+
+
+class Segment(_Strict):
+    """One straight rod given explicitly (printed configuration, origin at fabric centre)."""
+
+    start: tuple[float, float] = Field(description="(x, y) of the rod's first end [mm]")
+    direction: tuple[float, float] = Field((1.0, 0.0), description="unit direction; along x")
+    length: float = Field(gt=0.0, le=1e4, description="printed length [mm]")
+
+    @model_validator(mode="after")
+    def _direction_along_x(self) -> Segment:
+        dx, dy = self.direction
+        norm = math.hypot(dx, dy)
+        if norm == 0.0:
+            raise ValueError("direction: must be a non-zero vector")
+        if abs(dy) > 1e-9 * norm or dx < 0:
+            raise ValueError(
+                "direction: only rods along +x (the stretch direction), i.e. (1, 0), are "
+                f"supported by the structured mesh; got {self.direction}"
+            )
+        return self
+
+
+class Rods(_Strict):
+    """Straight rods printed along x: N parallel rods at gap ``s``, or explicit ``segments``."""
+
+    h: float = Field(0.3, gt=0.0, le=20.0, description="thickness, out of plane [mm]")
+    b: float = Field(1.0, gt=0.0, le=50.0, description="width, in plane [mm]")
+    L: float = Field(100.0, gt=0.0, le=1e4, description="printed length [mm]")
+    E_B: float = Field(3000.0, gt=0.0, le=1e6, description="rod Young's modulus [MPa]")
+    nu_B: float = Field(0.35, ge=0.0, lt=0.5, description="rod Poisson ratio [-]")
+    rho_B: float = Field(1.24e-9, gt=0.0, description="rod density [t/mm^3] (inertial mode)")
+    N: int = Field(1, ge=1, le=200, description="number of parallel rods")
+    s: float = Field(
+        10.0, ge=0.0, le=1e4, description="edge-to-edge gap between parallel rods [mm]"
+    )
+    segments: list[Segment] | None = Field(
+        None, description="explicit rods; when given, N, s and L are ignored"
+    )
+
+    @model_validator(mode="after")
+    def _gap_for_parallel(self) -> Rods:
+        if self.segments is None and self.N > 1 and self.s <= 0.0:
+            raise ValueError(
+                "s: must be > 0 for N > 1 parallel rods (s = 0 means one rod N*b wide: "
+                "use N = 1 and b = N*b)"
+            )
+        return self
+
+
+class Release(_Strict):
+    """Pre-stretch and the gradual release of the clamps."""
+
+    eps0: float = Field(0.5, gt=0.0, le=3.0, description="pre-stretch engineering strain [-]")
+    steps: int = Field(40, ge=1, le=100000, description="number of release increments")
+    adaptive: bool = Field(True, description="cut the increment when a step fails to converge")
+    min_step_fraction: float = Field(
+        1e-3, gt=0.0, le=1.0, description="smallest increment as a fraction of the nominal one"
+    )
+
+
+class Imperfection(_Strict):
+    """Small random out-of-plane noise added to the rods after printing."""
+
+    amplitude: float = Field(1e-3, ge=0.0, le=10.0, description="RMS of the noise [mm]")
+    seed: int = Field(0, ge=0, description="seed of the random generator")
+    correlation: float = Field(
+        2.0, gt=0.0, le=1e3, description="correlation length of the noise along the rod [mm]"
+    )
+
+
+class MeshOptions(_Strict):
+    """Resolution of the graded, rod-conforming triangle mesh (printed configuration)."""
+
+    dx_rod: float = Field(1.0, gt=0.0, le=20.0, description="node spacing along rods [mm]")
+    dx_far: float = Field(4.0, gt=0.0, le=100.0, description="spacing in x beyond rod ends [mm]")
+    dy_far: float = Field(5.0, gt=0.0, le=100.0, description="largest spacing in y [mm]")
+    grading: float = Field(1.5, ge=1.0, le=3.0, description="growth ratio of spacings [-]")
+
+    @model_validator(mode="after")
+    def _order(self) -> MeshOptions:
+        if self.dx_far < self.dx_rod:
+            raise ValueError(f"dx_far: must be >= dx_rod = {self.dx_rod} mm")
+        return self
+
+
+class SolverOptions(_Strict):
+    """Newton energy minimisation."""
+
+    rtol: float = Field(
+        1e-6, gt=0.0, lt=1.0, description="residual tolerance relative to the force scale"
+    )
+    max_iter: int = Field(60, ge=1, le=10000, description="Newton iterations per increment")
+    linear_solver: Literal["auto", "qdldl", "splu"] = Field(
+        "auto", description="sparse direct solver"
+    )
+    negative_curvature: bool = Field(
+        True, description="follow negative-curvature directions past bifurcations"
+    )
+
+
+class Dynamics(_Strict):
+    """Inertial release: implicit damped dynamics, then settling."""
+
+    release_time: float = Field(1.0, gt=0.0, le=1e5, description="duration of the release [s]")
+    settle_time: float = Field(1.0, ge=0.0, le=1e6, description="settling after release [s]")
+    dt: float = Field(0.01, gt=0.0, le=10.0, description="time step [s]")
+    damping: float = Field(
+        5.0, ge=0.0, le=1e6, description="mass-proportional damping coefficient [1/s]"
+    )
+
+
+class Case(_Strict):
+    """Everything that defines one run. Defaults are the SPEC defaults (single rod)."""
+
+    name: str = Field("case", min_length=1, max_length=200)
+    fabric: Fabric = Field(default_factory=Fabric)
+    rods: Rods = Field(default_factory=Rods)
+    release: Release = Field(default_factory=Release)
+    imperfection: Imperfection = Field(default_factory=Imperfection)
+    mesh: MeshOptions = Field(default_factory=MeshOptions)
+    solver: SolverOptions = Field(default_factory=SolverOptions)
+    mode: Literal["quasi-static", "inertial"] = "quasi-static"
+    dynamics: Dynamics = Field(default_factory=Dynamics)
+
+    @model_validator(mode="after")
+    def _geometry(self) -> Case:
+        segs = self.segments()
+        b = self.rods.b
+        if self.mesh.dx_rod > 0.5 * min(s[2] for s in segs):
+            raise ValueError(
+                f"mesh.dx_rod: must be <= half the shortest rod length "
+                f"({0.5 * min(s[2] for s in segs):g} mm)"
+            )
+        # rods must not overlap or touch (footprints are b wide)
+        for i in range(len(segs)):
+            for j in range(i + 1, len(segs)):
+                xi, yi, li = segs[i]
+                xj, yj, lj = segs[j]
+                overlap_x = min(xi + li, xj + lj) - max(xi, xj)
+                if overlap_x > -1e-9 and abs(yi - yj) < b - 1e-9:
+                    raise ValueError(
+                        f"rods.segments: rods {i} and {j} overlap (their footprints of width "
+                        f"b = {b} mm intersect); keep |y_i - y_j| >= b or separate them in x"
+                    )
+        return self
+
+    # ---- derived geometry -------------------------------------------------------------
+    def segments(self) -> list[tuple[float, float, float]]:
+        """Rods as (x_start, y_centre, length) in the printed configuration, sorted by y."""
+        r = self.rods
+        if r.segments is not None:
+            out = [(s.start[0], s.start[1], s.length) for s in r.segments]
+        else:
+            pitch = r.b + r.s
+            ys = [(k - (r.N - 1) / 2.0) * pitch for k in range(r.N)]
+            out = [(-r.L / 2.0, y, r.L) for y in ys]
+        return sorted(out, key=lambda s: (s[1], s[0]))
+
+    def fabric_extent(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) of the fabric in the printed (stretched) configuration."""
+        segs = self.segments()
+        b = self.rods.b
+        xmin = min(s[0] for s in segs) - self.fabric.margin_x
+        xmax = max(s[0] + s[2] for s in segs) + self.fabric.margin_x
+        ymin = min(s[1] for s in segs) - b / 2 - self.fabric.margin_y
+        ymax = max(s[1] for s in segs) + b / 2 + self.fabric.margin_y
+        # symmetric about the origin in x so the clamps move symmetrically
+        half = max(abs(xmin), abs(xmax))
+        return -half, half, ymin, ymax
+
+
+class ConfigError(ValueError):
+    """A case description is invalid. The message names each bad field and its allowed range."""
+
+
+def _format_validation_error(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "case"
+        msg = e["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, ") :]
+        ctx = e.get("ctx") or {}
+        bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
+        extra = f" (allowed: {bounds})" if bounds else ""
+        got = e.get("input")
+        got_s = f"; got {got!r}" if got is not None and not isinstance(got, dict) else ""
+        lines.append(f"{loc}: {msg}{extra}{got_s}")
+    return "\n".join(lines)
+
+
+def case_from_dict(data: dict) -> Case:
+    """Validate a plain dict (e.g. parsed TOML) into a :class:`Case`; raise ConfigError."""
+    try:
+        return Case.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(_format_validation_error(err)) from None
+
+
+def load_case(path: str | Path) -> Case:
+    """Read and validate a TOML case file; raise :class:`ConfigError` with a clear message."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: no such file")
+    try:
+        data = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{p}: not valid TOML: {err}") from None
+    return case_from_dict(data)
