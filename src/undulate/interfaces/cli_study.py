@@ -1,0 +1,166 @@
+"""``undulate study ...``: run resumable parametric studies, inspect them, plot and report.
+
+Mounted by :mod:`undulate.interfaces.cli` as ``undulate study``.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from undulate.study.presets import preset_names, resolve_study
+from undulate.study.spec import StudyError
+
+study_app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="Parametric studies: presets (" + ", ".join(preset_names()) + ") or a SWEEP.toml; "
+    "resumable, local processes or dask.",
+)
+
+_out = Console()
+_err = Console(stderr=True)
+
+
+def _fail(msg: str, code: int = 2) -> None:
+    _err.print(f"[red]error:[/] {msg}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+@study_app.command("run")
+def run_cmd(
+    target: Annotated[str, typer.Argument(help="preset name or path to a SWEEP.toml")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
+    quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant")] = False,
+    workers: Annotated[
+        int | None, typer.Option("--workers", "-j", min=1, help="local processes [cpu count]")
+    ] = None,
+    dask: Annotated[
+        str | None, typer.Option("--dask", help="dask.distributed scheduler address")
+    ] = None,
+    retry_failed: Annotated[
+        bool, typer.Option("--retry-failed", help="run failed runs again")
+    ] = False,
+    no_artifacts: Annotated[
+        bool, typer.Option("--no-artifacts", help="do not keep per-run artifacts")
+    ] = False,
+    seeds: Annotated[
+        int | None, typer.Option("--seeds", min=1, help="seeds 0..K-1 per parameter point")
+    ] = None,
+    runner: Annotated[
+        str | None,
+        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
+    ] = None,
+) -> None:
+    """Run (or resume) a study into OUT; finished runs are skipped."""
+    from undulate.study.runner import RUNNER_ENV, run_study
+
+    try:
+        study = resolve_study(target, quick=quick, seeds=seeds)
+    except StudyError as err:
+        _fail(str(err))
+    _err.print(f"study [bold]{study.name}[/]: {len(study.runs)} runs -> {out}", highlight=False,
+               soft_wrap=True)
+    try:
+        summary = run_study(
+            study,
+            out,
+            run_fn=runner or os.environ.get(RUNNER_ENV) or None,
+            workers=workers,
+            dask_address=dask,
+            retry_failed=retry_failed,
+            artifacts=not no_artifacts,
+            progress=True,
+            console=_err,
+        )
+    except StudyError as err:
+        _fail(str(err))
+    except KeyboardInterrupt:
+        _err.print("interrupted: finished runs are saved; run the same command to resume")
+        raise typer.Exit(130) from None
+    _err.print(
+        f"ran {summary.ran} ({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s;"
+        f" skipped {summary.skipped_ok} done"
+        + (f", {summary.skipped_failed} failed (use --retry-failed)" if summary.skipped_failed
+           else "")
+        + (f"; table: {summary.table}" if summary.table else ""),
+        highlight=False,
+        soft_wrap=True,
+    )
+    if summary.invalid_files:
+        _err.print(f"[yellow]ignored {len(summary.invalid_files)} invalid record file(s)[/]")
+
+
+@study_app.command("status")
+def status_cmd(
+    directory: Annotated[Path, typer.Argument(help="study directory")],
+) -> None:
+    """Summarise a study: done / failed / pending, run times, first error lines."""
+    from undulate.study.storage import read_study, scan_runs, write_table
+
+    meta = read_study(directory)
+    scan = scan_runs(directory)
+    if meta is None and not scan.records:
+        _fail(f"{directory}: not a study directory (no study.json, no runs/)")
+    meta = meta or {}
+    expected = [r["id"] for r in meta.get("runs", [])] or list(scan.records)
+    recs = [scan.records[i] for i in expected if i in scan.records]
+    ok = [r for r in recs if r["status"] == "ok"]
+    failed = [r for r in recs if r["status"] == "failed"]
+    t = Table(title=f"study {meta.get('name', '?')}" + (" (quick)" if meta.get("quick") else ""))
+    t.add_column("item")
+    t.add_column("value", justify="right")
+    t.add_row("total", str(len(expected)))
+    t.add_row("done (ok)", str(len(ok)))
+    t.add_row("failed", str(len(failed)))
+    t.add_row("pending", str(len(expected) - len(recs)))
+    times = [float(r["elapsed_s"]) for r in ok if r.get("elapsed_s") is not None]
+    if times:
+        t.add_row("run time min / median / max [s]",
+                  f"{min(times):.3g} / {statistics.median(times):.3g} / {max(times):.3g}")
+        t.add_row("run time total [s]", f"{sum(times):.4g}")
+    if scan.invalid or scan.tmp:
+        t.add_row("ignored files (invalid / tmp)", f"{len(scan.invalid)} / {len(scan.tmp)}")
+    _out.print(t)
+    if failed:
+        _out.print("[bold]failures[/] (first error line):")
+        for r in failed[:20]:
+            first = (r.get("error") or "?").splitlines()[0]
+            _out.print(f"  {r['id']} {r.get('params')}: {first}", highlight=False, soft_wrap=True)
+        if len(failed) > 20:
+            _out.print(f"  ... and {len(failed) - 20} more")
+    for p in scan.invalid:
+        _out.print(f"[yellow]invalid record ignored:[/] {p}", highlight=False, soft_wrap=True)
+    if recs:
+        write_table(directory)
+
+
+@study_app.command("figures")
+def figures_cmd(directory: Annotated[Path, typer.Argument(help="study directory")]) -> None:
+    """Make the figures the study's data support (PNG + PDF in DIR/figures)."""
+    from undulate.study.figures import make_figures
+
+    if not (directory / "runs").is_dir():
+        _fail(f"{directory}: not a study directory (no runs/)")
+    made = make_figures(directory)
+    if not made:
+        _err.print("no figure: not enough successful runs with the needed metrics")
+    for _name, paths in made.items():
+        for p in paths:
+            _out.print(str(p), highlight=False, soft_wrap=True)
+
+
+@study_app.command("report")
+def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")]) -> None:
+    """Write DIR/report.md (figures, fitted slopes/exponents vs theory, bundling ratios)."""
+    from undulate.study.report import write_report
+
+    if not (directory / "runs").is_dir():
+        _fail(f"{directory}: not a study directory (no runs/)")
+    _out.print(str(write_report(directory)), highlight=False, soft_wrap=True)

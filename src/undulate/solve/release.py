@@ -1,0 +1,263 @@
+"""The experiment, step by step: stretch, print, perturb, release (quasi-static or inertial).
+
+1. **Pre-stretch.** The fabric (reference = unstretched mesh) is stretched along x by clamping
+   its short edges at x = X (1 + eps0) (y and z held at their reference values, as in a frame);
+   the long edges are free. The in-plane equilibrium is solved with z = 0 (the fabric is flat
+   on the print bed).
+2. **Print.** Rod element groups are built from the pre-stretched positions, so the rods are
+   stress-free there.
+3. **Imperfection.** A smooth random out-of-plane displacement (RMS ``amplitude``, correlation
+   length ``correlation``, from ``seed``) is added under the rods.
+4. **Release.** The clamp strain goes from eps0 to 0. Quasi-static: equal increments (cut in
+   half on failure when ``adaptive``), each solved to a *stable* equilibrium by
+   :func:`undulate.solve.newton.minimize` from a predictor. Inertial: implicit damped dynamics
+   (see :mod:`undulate.solve.dynamics`) with the clamps moving over ``release_time``, then
+   ``settle_time`` of settling.
+
+Every step records the release strain, energy, max rod height, Newton iterations.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..mechanics.assemble import Assembly, ElementGroup
+from ..mechanics.build import (
+    RodSection,
+    fabric_groups,
+    lateral_stretch,
+    rod_centrelines,
+    rod_groups,
+)
+from ..mesh import FabricMesh, build_mesh
+from ..model import Case
+from .linear import make_solver
+from .newton import ConvergenceError, NewtonOptions, minimize
+
+__all__ = ["Simulation", "SimResult", "prepare", "run_release", "imperfection_field"]
+
+ProgressFn = Callable[[float, dict], None]
+
+
+@dataclass
+class SimResult:
+    """Final rest state and the record of how it was reached."""
+
+    case: Case
+    mesh: FabricMesh
+    section: RodSection
+    x_reference: np.ndarray  # (n, 3) unstretched fabric
+    x_printed: np.ndarray  # (n, 3) pre-stretched, flat, at printing
+    x_final: np.ndarray  # (n, 3) rest state after release
+    centerlines: list[np.ndarray]  # final rod centre lines (m, 3)
+    centerlines_printed: list[np.ndarray]
+    history: list[dict]
+    stats: dict
+    energies: dict
+    element_energy: dict = field(default_factory=dict)
+
+
+@dataclass
+class Simulation:
+    case: Case
+    mesh: FabricMesh
+    section: RodSection
+    X3: np.ndarray
+    fabric: list[ElementGroup]
+    force_scale: float
+
+
+def prepare(case: Case) -> Simulation:
+    """Mesh the case and build the fabric's element groups."""
+    f, r = case.fabric, case.rods
+    eps0 = case.release.eps0
+    lam_y = lateral_stretch(eps0, f.nu)
+    m = case.mesh
+    mesh = build_mesh(
+        case.segments(), r.b, case.fabric_extent(), eps0=eps0, lam_y=lam_y,
+        dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading,
+    )
+    sec = RodSection(h=r.h, b=r.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t)
+    X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
+    groups = fabric_groups(mesh, f.E, f.nu, f.t)
+    return Simulation(case, mesh, sec, X3, groups, force_scale=f.E * f.t * m.dx_rod)
+
+
+def _clamped(mesh: FabricMesh) -> np.ndarray:
+    clamp = np.zeros(mesh.n_nodes, dtype=bool)
+    clamp[mesh.left] = True
+    clamp[mesh.right] = True
+    return clamp
+
+
+def clamp_positions(sim: Simulation, e: float, x: np.ndarray) -> np.ndarray:
+    """Copy of ``x`` with the clamped edges at clamp strain ``e`` (x scaled, y, z reference)."""
+    out = x.copy()
+    clamp = _clamped(sim.mesh)
+    out[clamp, 0] = sim.X3[clamp, 0] * (1.0 + e)
+    out[clamp, 1] = sim.X3[clamp, 1]
+    out[clamp, 2] = 0.0
+    return out
+
+
+def imperfection_field(n: int, dx: float, amplitude: float, correlation: float,
+                       rng: np.random.Generator) -> np.ndarray:
+    """Smooth random profile of RMS ``amplitude`` along ``n`` nodes spaced ``dx``."""
+    if amplitude == 0.0 or n == 0:
+        return np.zeros(n)
+    w = rng.standard_normal(n + 64)
+    sig = max(correlation / dx, 0.5)
+    k = np.arange(-int(4 * sig) - 1, int(4 * sig) + 2)
+    ker = np.exp(-0.5 * (k / sig) ** 2)
+    z = np.convolve(w, ker, mode="same")[32 : 32 + n]
+    z -= z.mean()
+    rms = np.sqrt(np.mean(z**2))
+    return amplitude * z / rms if rms > 0 else np.zeros(n)
+
+
+def _max_height(sim: Simulation, x: np.ndarray) -> float:
+    cl = rod_centrelines(sim.mesh.rods, x, sim.section)
+    return float(max(np.max(np.abs(c[:, 2])) for c in cl)) - sim.section.offset
+
+
+def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
+    """In-plane equilibrium of the fabric stretched by eps0 between the clamps (z = 0)."""
+    eps0 = sim.case.release.eps0
+    lam_y = lateral_stretch(eps0, sim.case.fabric.nu)
+    x = sim.X3 * np.array([1.0 + eps0, lam_y, 0.0])
+    x = clamp_positions(sim, eps0, x)
+    fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
+    fixed[_clamped(sim.mesh)] = True
+    fixed[:, 2] = True
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric, fixed)
+    o = NewtonOptions(**{**opts.__dict__, "require_stable": True, "negative_curvature": False})
+    res = minimize(asm, x, asm.free(x), o)
+    if not res.converged:
+        raise ConvergenceError(f"pre-stretch: {res.message}", step=0, residual=res.residual)
+    return asm.full(res.u, x), {"iterations": res.iterations, "residual": res.residual}
+
+
+def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
+    """Run the whole experiment for ``case`` and return the final rest state."""
+    t_start = time.perf_counter()
+    sim = prepare(case)
+    so = case.solver
+    opts = NewtonOptions(rtol=so.rtol, force_scale=sim.force_scale, max_iter=so.max_iter,
+                         negative_curvature=so.negative_curvature,
+                         linear_solver=so.linear_solver)
+    x_print, pre = prestretch(sim, opts)
+    rods = rod_groups(sim.mesh.rods, x_print, sim.section)
+    fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
+    fixed[_clamped(sim.mesh)] = True
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods, fixed)
+    rng = np.random.default_rng(case.imperfection.seed)
+    x = x_print.copy()
+    imp = case.imperfection
+    for ch in sim.mesh.rods:
+        dz = imperfection_field(ch.n_nodes, case.mesh.dx_rod, imp.amplitude, imp.correlation, rng)
+        for idx in (ch.p, ch.qp, ch.qm):
+            x[idx, 2] += dz
+    t_setup = time.perf_counter() - t_start
+    if case.mode == "inertial":
+        from .dynamics import release_inertial
+
+        x, history, stats = release_inertial(sim, asm, x, opts, progress)
+    else:
+        x, history, stats = _release_quasistatic(sim, asm, x, opts, progress)
+    stats.update(
+        prestretch_iterations=pre["iterations"],
+        setup_time_s=t_setup,
+        wall_time_s=time.perf_counter() - t_start,
+        n_nodes=sim.mesh.n_nodes,
+        n_unknowns=asm.n_free,
+        hessian_nnz=asm.nnz,
+        mode=case.mode,
+        seed=imp.seed,
+    )
+    return SimResult(
+        case=case, mesh=sim.mesh, section=sim.section, x_reference=sim.X3, x_printed=x_print,
+        x_final=x, centerlines=rod_centrelines(sim.mesh.rods, x, sim.section),
+        centerlines_printed=rod_centrelines(sim.mesh.rods, x_print, sim.section),
+        history=history, stats=stats, energies=asm.energy_by_group(x),
+        element_energy={
+            "fabric_membrane": asm.element_energies(x, "fabric_membrane"),
+        },
+    )
+
+
+def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
+                         progress: ProgressFn | None) -> tuple[np.ndarray, list[dict], dict]:
+    rel = sim.case.release
+    eps0 = rel.eps0
+    de_nom = eps0 / rel.steps
+    de_min = de_nom * rel.min_step_fraction
+    e = eps0
+    de = de_nom
+    solver = make_solver(opts.linear_solver)
+    rng = np.random.default_rng(sim.case.imperfection.seed + 1)
+    history: list[dict] = []
+    totals = dict(newton_iterations=0, negative_curvature_steps=0, step_cuts=0,
+                  assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0, line_search_time_s=0.0)
+    rod_nodes = [np.concatenate([ch.p, ch.qp, ch.qm]) for ch in sim.mesh.rods]
+    on_rod = np.zeros(sim.mesh.n_nodes, dtype=bool)
+    for rn in rod_nodes:
+        on_rod[rn] = True
+    # equilibrium with the imperfection at the start (clamps still at eps0)
+    steps = [(e, e)]
+    x_prev = None
+    e_prev = None
+    while True:
+        e_old, e_new = steps.pop() if steps else (e, max(e - de, 0.0))
+        # predictor: the fabric follows the clamps affinely in x, the (nearly inextensible)
+        # rods keep their shape and only move with the affine map of their centroid; plus the
+        # secant of the last increment out of plane
+        x_pred = x.copy()
+        scale = (1.0 + e_new) / (1.0 + e_old)
+        x_pred[~on_rod, 0] *= scale
+        for ch_nodes in rod_nodes:
+            xc = x[ch_nodes, 0].mean()
+            x_pred[ch_nodes, 0] += xc * (scale - 1.0)
+        if x_prev is not None and e_prev is not None and e_prev != e_old:
+            ratio = (e_old - e_new) / (e_prev - e_old)
+            dz = (x[:, 2] - x_prev[:, 2]) * ratio
+            x_pred[:, 2] += dz
+        x_pred = clamp_positions(sim, e_new, x_pred)
+        res = minimize(asm, x_pred, asm.free(x_pred), opts, solver=solver, rng=rng)
+        totals["newton_iterations"] += res.iterations
+        totals["negative_curvature_steps"] += res.negative_steps
+        totals["assembly_time_s"] += res.times.get("assembly", 0.0)
+        totals["factor_time_s"] += res.times.get("factor", 0.0)
+        totals["eig_time_s"] += res.times.get("eig", 0.0)
+        totals["line_search_time_s"] += res.times.get("line_search", 0.0)
+        if not res.converged:
+            if rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
+                de = (e_old - e_new) / 2
+                totals["step_cuts"] += 1
+                steps.append((e_old, e_old - de))
+                continue
+            raise ConvergenceError(
+                f"release step {len(history)} (release strain {eps0 - e_new:.4g}): "
+                f"{res.message}",
+                step=len(history), residual=res.residual, release_strain=eps0 - e_new,
+            )
+        x_prev, e_prev = x, e_old
+        x = asm.full(res.u, x_pred)
+        e = e_new
+        rec = dict(step=len(history), release_strain=eps0 - e, clamp_strain=e,
+                   energy=res.energy, max_height=_max_height(sim, x),
+                   newton_iterations=res.iterations, negative_steps=res.negative_steps,
+                   residual=res.residual)
+        history.append(rec)
+        if progress is not None:
+            progress((eps0 - e) / eps0, rec)
+        if e <= 0.0:
+            break
+        de = min(2.0 * de, de_nom)
+    totals["release_steps"] = len(history) - 1
+    totals["converged"] = True
+    totals["final_residual"] = history[-1]["residual"]
+    return x, history, totals

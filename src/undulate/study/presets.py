@@ -1,0 +1,129 @@
+"""Named studies of SPEC section 5, each with a ``quick`` variant.
+
+=========================  =====================================  ==============================
+preset                     full                                   quick
+=========================  =====================================  ==============================
+single-rod-h               h = 0.08..2.0 step 0.02 (97), N = 1,   h = 0.1..2.0 step 0.1 (20)
+                           eps0 = 0.5
+single-rod-eps0            eps0 in [0.1 .. 1.0] (8), h = 0.3      eps0 in [0.1, 0.3, 0.5, 1.0]
+parallel-phase-diagram     N = 5, h = 0.1..2.0 step 0.1 (20),     h = 0.2..2.0 step 0.3 (7),
+                           s = 0..50 step 2.5 (21): 420 runs      s in [0, 5, 10, 25, 50]: 35
+=========================  =====================================  ==============================
+
+Quick variants also use a coarser, cheaper case: rods L = 60 mm, ``mesh.dx_rod = 2.0``,
+``mesh.dx_far = 6.0``, ``mesh.dy_far = 8.0``, ``release.steps = 15``. Quick results are for
+smoke tests and the pipeline, not for physics (shorter rods shift the quantization plateaus).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from .spec import Study, StudyError, build_study, frange, load_sweep_toml
+
+__all__ = ["PRESETS", "preset_names", "get_preset", "resolve_study", "QUICK_OVERRIDES"]
+
+#: Changes applied to the base case of every preset in ``--quick`` mode.
+QUICK_OVERRIDES: dict[str, Any] = {
+    "rods": {"L": 60.0},
+    "mesh": {"dx_rod": 2.0, "dx_far": 6.0, "dy_far": 8.0},
+    "release": {"steps": 15},
+}
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any]) -> dict[str, Any]:
+    base: dict[str, Any] = {
+        "fabric": {"E": 0.45, "t": 0.4},
+        "rods": {"b": 1.0, "L": 100.0, "E_B": 3000.0, **rods},
+        "release": {"eps0": 0.5, **release},
+        "imperfection": {"seed": 0},
+        "mode": "quasi-static",
+    }
+    return _merge(base, QUICK_OVERRIDES) if quick else base
+
+
+def _single_rod_h(quick: bool, seeds: int | None) -> Study:
+    hs = frange(0.1, 2.0, 0.1) if quick else frange(0.08, 2.0, 0.02)
+    return build_study(
+        "single-rod-h",
+        _base(quick, {"N": 1, "h": 0.3}, {"eps0": 0.5}),
+        {"rods.h": hs},
+        kind="preset",
+        seeds=seeds,
+        quick=quick,
+    )
+
+
+def _single_rod_eps0(quick: bool, seeds: int | None) -> Study:
+    eps = [0.1, 0.3, 0.5, 1.0] if quick else [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
+    return build_study(
+        "single-rod-eps0",
+        _base(quick, {"N": 1, "h": 0.3}, {}),
+        {"release.eps0": eps},
+        kind="preset",
+        seeds=seeds,
+        quick=quick,
+    )
+
+
+def _parallel(quick: bool, seeds: int | None) -> Study:
+    hs = frange(0.2, 2.0, 0.3) if quick else frange(0.1, 2.0, 0.1)
+    ss = [0.0, 5.0, 10.0, 25.0, 50.0] if quick else frange(0.0, 50.0, 2.5)
+    return build_study(
+        "parallel-phase-diagram",
+        _base(quick, {"N": 5, "h": 0.3, "s": 10.0}, {"eps0": 0.5}),
+        {"rods.h": hs, "rods.s": ss},
+        kind="preset",
+        seeds=seeds,
+        quick=quick,
+        single_rod_rule=True,
+        extra_definition={"N_nominal": 5},
+    )
+
+
+#: name -> builder(quick, seeds) -> Study
+PRESETS: dict[str, Callable[[bool, int | None], Study]] = {
+    "single-rod-h": _single_rod_h,
+    "single-rod-eps0": _single_rod_eps0,
+    "parallel-phase-diagram": _parallel,
+}
+
+
+def preset_names() -> list[str]:
+    """The valid preset names."""
+    return list(PRESETS)
+
+
+def get_preset(name: str, *, quick: bool = False, seeds: int | None = None) -> Study:
+    """Build a preset study; unknown names raise StudyError listing the valid ones."""
+    try:
+        builder = PRESETS[name]
+    except KeyError:
+        raise StudyError(
+            f"unknown preset {name!r}; valid presets: {', '.join(preset_names())} "
+            "(or a path to a SWEEP.toml)"
+        ) from None
+    return builder(quick, seeds)
+
+
+def resolve_study(target: str, *, quick: bool = False, seeds: int | None = None) -> Study:
+    """A preset name, or a path to a SWEEP.toml (anything ending in .toml or an existing file)."""
+    if target in PRESETS:
+        return get_preset(target, quick=quick, seeds=seeds)
+    p = Path(target)
+    if target.endswith(".toml") or p.is_file():
+        return load_sweep_toml(p, seeds=seeds, quick=quick)
+    return get_preset(target, quick=quick, seeds=seeds)

@@ -1,0 +1,132 @@
+"""``DIR/report.md``: figures plus the numbers that compare a study with the analytical model.
+
+Sections (each only when the data support it): run counts; slope of l vs h in the linear regime
+(runs with n >= 7, i.e. before the quantization plateaus) against eq. (1)'s slope; the eps0
+exponent of l (log-log fit) against -1/2; the fraction of runs where circular arcs fit better
+than a sine (``r2_arcs_mean > r2_sine_mean``); the bundling ratios h*_n(s_min)/h*_n(s_max) for
+the transitions 3->1, 5->3, 7->5 (h*_n = smallest h with n <= n_target) against N^(1/3).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from .derived import arcs_beat_sines, fit_eps0_exponent, fit_l_slope, hstar_ratios, theory
+from .figures import make_figures
+from .storage import collect, read_study
+
+__all__ = ["build_report", "write_report"]
+
+
+def _f(x: Any, fmt: str = ".4g") -> str:
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    return "n/a" if not math.isfinite(xf) else format(xf, fmt)
+
+
+def build_report(
+    study_dir: str | Path,
+    df: pd.DataFrame | None = None,
+    figures: dict[str, list[Path]] | None = None,
+) -> str:
+    """The markdown text of the report (figures must already exist to be linked)."""
+    study_dir = Path(study_dir)
+    if df is None:
+        df = collect(study_dir)
+    meta = read_study(study_dir) or {}
+    figures = figures or {}
+    n_total = int(meta.get("n_runs", len(df)))
+    st = df["status"].value_counts() if "status" in df else pd.Series(dtype=int)
+    n_ok, n_failed = int(st.get("ok", 0)), int(st.get("failed", 0))
+    lines = [
+        f"# Study report: {meta.get('name', study_dir.name)}",
+        "",
+        f"- kind: {meta.get('kind', '?')}{' (quick)' if meta.get('quick') else ''}",
+        f"- runs: {n_total} expected, {n_ok} ok, {n_failed} failed, "
+        f"{max(n_total - n_ok - n_failed, 0)} pending",
+        f"- analytical formulas from: {theory()['source']}",
+        "",
+    ]
+    if figures:
+        lines += ["## Figures", ""]
+        for name, paths in figures.items():
+            png = next((p for p in paths if p.suffix == ".png"), paths[0])
+            pdf = next((p for p in paths if p.suffix == ".pdf"), None)
+            rel = png.relative_to(study_dir)
+            extra = f" ([pdf]({pdf.relative_to(study_dir)}))" if pdf else ""
+            lines += [f"### {name.replace('_', ' ')}{extra}", "", f"![{name}]({rel})", ""]
+
+    lines += ["## Comparison with the analytical model", ""]
+    fit = fit_l_slope(df)
+    if fit:
+        rel_err = fit["slope"] / fit["slope_eq1"] - 1.0
+        lines += [
+            f"**l vs h, linear regime** (runs with n >= {fit['n_min']}, {fit['n_points']} points, "
+            f"eps0 = {_f(fit['eps0'])}):",
+            "",
+            "| quantity | value |",
+            "|---|---|",
+            f"| fitted slope dl/dh (with intercept) | {_f(fit['slope'])} |",
+            f"| fitted intercept [mm] | {_f(fit['intercept'])} |",
+            f"| fitted slope through the origin | {_f(fit['slope_origin'])} |",
+            f"| eq. (1) slope | {_f(fit['slope_eq1'])} |",
+            f"| fitted / eq. (1) - 1 | {_f(100 * rel_err, '.1f')} % |",
+            "",
+        ]
+    exp = fit_eps0_exponent(df)
+    if exp:
+        lines += [
+            f"**l vs eps0** (log-log fit, h = {_f(exp['h'])} mm, {exp['n_points']} points): "
+            f"exponent {_f(exp['exponent'], '.3f')} (eq. (1): -0.5).",
+            "",
+        ]
+    arcs = arcs_beat_sines(df)
+    if arcs:
+        lines += [
+            f"**Arcs vs sines**: circular arcs fit better (R² higher) in {arcs['wins']} of "
+            f"{arcs['n']} runs ({_f(100 * arcs['fraction'], '.1f')} %).",
+            "",
+        ]
+    ratios = hstar_ratios(df, meta.get("definition", {}).get("N_nominal"))
+    if ratios:
+        r0 = ratios[0]
+        lines += [
+            f"**Bundling**: h*_n(s = {_f(r0['s_min'])}) / h*_n(s = {_f(r0['s_max'])}) "
+            f"vs N^(1/3) = {_f(r0['bundling'], '.3f')} (N = {r0['N']}); "
+            "h*_n = smallest h whose median n over seeds is <= n_target.",
+            "",
+            "| transition | h*(s_min) [mm] | h*(s_max) [mm] | ratio | N^(1/3) |",
+            "|---|---|---|---|---|",
+        ]
+        for r in ratios:
+            lines.append(
+                f"| {r['transition']} | {_f(r['hstar_s_min'])} | {_f(r['hstar_s_max'])} | "
+                f"{_f(r['ratio'], '.3f')} | {_f(r['bundling'], '.3f')} |"
+            )
+        lines.append("")
+    if not (fit or exp or arcs or ratios):
+        lines += ["No comparison possible with the data present.", ""]
+    if n_failed and "error" in df:
+        lines += ["## Failures", ""]
+        errs = df.loc[df["status"] == "failed", "error"].fillna("?").astype(str)
+        firsts = errs.map(lambda e: (e.splitlines() or ["?"])[0])
+        for msg, count in firsts.value_counts().head(10).items():
+            lines.append(f"- {count} x `{msg[:200]}`")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_report(study_dir: str | Path) -> Path:
+    """Make the figures and write ``DIR/report.md``; return its path."""
+    study_dir = Path(study_dir)
+    df = collect(study_dir)
+    figs = make_figures(study_dir, df)
+    path = study_dir / "report.md"
+    path.write_text(build_report(study_dir, df, figs))
+    return path

@@ -1,0 +1,434 @@
+"""Run a study: skip finished runs, execute the rest locally or on dask, write records atomically.
+
+The run function is injectable: ``run_fn(case, out, artifacts=...) -> dict`` with the signature
+of :func:`undulate.api.run_case` (the default, imported lazily inside the worker). It may also be
+given as a ``"module:function"`` string, resolved in the worker; the environment variable
+``UNDULATE_STUDY_RUNNER`` sets that string when no run function is passed.
+
+Records are written by the driver process only (dask workers need no shared filesystem for
+results) via :func:`undulate.study.storage.write_record`, atomically. Killing the driver loses at
+most the runs that were in flight; re-running the same command resumes.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import socket
+import sys
+import time
+import traceback
+from collections.abc import Callable, Iterable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from .spec import RunSpec, Study, StudyError
+from .storage import (
+    RECORD_SCHEMA,
+    jsonable,
+    read_study,
+    remove_stale_tmp,
+    scan_runs,
+    write_record,
+    write_study,
+    write_table,
+)
+
+__all__ = ["RunFn", "RunSummary", "run_study", "execute_run", "resolve_runner", "RUNNER_ENV"]
+
+RunFn = Callable[..., dict]
+RUNNER_ENV = "UNDULATE_STUDY_RUNNER"
+_MAX_CRASHES = 2  # a run in flight during this many worker crashes is recorded as failed
+
+
+def resolve_runner(runner: RunFn | str | None) -> RunFn:
+    """The run function: a callable, a ``"module:function"`` string, or None for run_case."""
+    if runner is None:
+        try:
+            from undulate.api import run_case  # lazy: the engine is heavy and optional here
+        except ImportError as err:
+            raise StudyError(f"runner: cannot import undulate.api.run_case: {err}") from None
+        return run_case
+    if callable(runner):
+        return runner
+    mod_name, sep, attr = str(runner).partition(":")
+    if not sep or not mod_name or not attr:
+        raise StudyError(f"runner: expected 'module:function', got {runner!r}")
+    try:
+        obj: Any = importlib.import_module(mod_name)
+        for part in attr.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as err:
+        raise StudyError(f"runner: cannot import {runner!r}: {err}") from None
+    if not callable(obj):
+        raise StudyError(f"runner: {runner!r} is not callable")
+    return obj
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def _tb_summary(err: BaseException, limit: int = 12) -> str:
+    lines = traceback.format_exception(type(err), err, err.__traceback__)
+    text = "".join(lines).rstrip().splitlines()
+    return "\n".join(text[-limit:])
+
+
+def execute_run(
+    runner: RunFn | str | None,
+    case_dict: dict[str, Any],
+    out: str | None,
+    artifacts: bool = True,
+) -> dict[str, Any]:
+    """Run one case in the current process; never raises for a failing run.
+
+    Returns ``{"status", "record", "error", "traceback", "started", "finished", "elapsed_s",
+    "host", "pid"}``. This is what worker processes / dask tasks execute.
+    """
+    started = _now()
+    t0 = time.perf_counter()
+    result: dict[str, Any] = {"record": None, "error": None, "traceback": None}
+    try:
+        from undulate.model import case_from_dict
+
+        fn = resolve_runner(runner)
+        case = case_from_dict(case_dict)
+        out_path = Path(out) if (out is not None and artifacts) else None
+        if out_path is not None:
+            out_path.mkdir(parents=True, exist_ok=True)
+        record = fn(case, out_path, artifacts=artifacts)
+        if not isinstance(record, dict):
+            raise TypeError(f"run function returned {type(record).__name__}, expected dict")
+        result["record"] = jsonable(record)
+        result["status"] = "ok"
+    except Exception as err:  # a failed run is data, not a crash of the study
+        result["status"] = "failed"
+        result["error"] = f"{type(err).__name__}: {err}"
+        result["traceback"] = _tb_summary(err)
+    result.update(
+        started=started,
+        finished=_now(),
+        elapsed_s=round(time.perf_counter() - t0, 6),
+        host=socket.gethostname(),
+        pid=os.getpid(),
+    )
+    return result
+
+
+@dataclass
+class RunSummary:
+    """What :func:`run_study` did."""
+
+    total: int
+    skipped_ok: int = 0
+    skipped_failed: int = 0
+    ran: int = 0
+    ok: int = 0
+    failed: int = 0
+    interrupted: bool = False
+    invalid_files: list[str] = field(default_factory=list)
+    wall_s: float = 0.0
+    table: Path | None = None
+
+    @property
+    def pending(self) -> int:
+        """Runs of the study still without a record (or skipped failures)."""
+        return self.total - self.skipped_ok - self.skipped_failed - self.ran
+
+
+class _Progress:
+    """Rich progress bar (done / running / failed, ETA); silent when not a terminal."""
+
+    def __init__(self, total: int, done0: int, enabled: bool, console: Any = None) -> None:
+        self.enabled = enabled
+        self.ok = 0
+        self.failed = 0
+        self.running = 0
+        self._bar = None
+        if not enabled:
+            return
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        console = console or Console(stderr=True)
+        if not console.is_terminal:
+            self.enabled = False
+            return
+        self._bar = Progress(
+            TextColumn("[bold]study"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("ok [green]{task.fields[ok]}[/] failed [red]{task.fields[failed]}[/] "
+                       "running [cyan]{task.fields[running]}[/]"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=console,
+        )
+        self._task = self._bar.add_task("study", total=total, completed=done0, ok=0, failed=0,
+                                        running=0)
+        self._bar.start()
+
+    def update(self, *, advance: int = 0) -> None:
+        if self._bar is not None:
+            self._bar.update(self._task, advance=advance, ok=self.ok, failed=self.failed,
+                             running=self.running)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+
+def _check_study_dir(out: Path, study: Study) -> None:
+    old = read_study(out)
+    if old is None:
+        return
+    if old.get("name") != study.name or bool(old.get("quick")) != study.quick:
+        raise StudyError(
+            f"{out} already holds study {old.get('name')!r} (quick={bool(old.get('quick'))}); "
+            f"use another --out for {study.name!r} (quick={study.quick})"
+        )
+
+
+def run_study(
+    study: Study,
+    out: str | Path,
+    *,
+    run_fn: RunFn | str | None = None,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    retry_failed: bool = False,
+    artifacts: bool = True,
+    progress: bool = True,
+    console: Any = None,
+    write_results: bool = True,
+) -> RunSummary:
+    """Run every run of ``study`` that has no record in ``out`` yet (plus failures if asked).
+
+    ``workers``: local worker processes (default ``os.cpu_count()``; 1 runs in-process).
+    ``dask_address``: a dask.distributed scheduler address (or a ``Client``/``LocalCluster``
+    object); runs are submitted as tasks, results come back to this process which writes them.
+    ``artifacts``: pass ``DIR/artifacts/<id>`` as ``out`` to the run function, else None.
+    A ``KeyboardInterrupt`` stops submitting, keeps every finished record and re-raises.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "runs").mkdir(exist_ok=True)
+    _check_study_dir(out, study)
+    if run_fn is None:
+        run_fn = os.environ.get(RUNNER_ENV) or None
+    if not callable(run_fn):
+        resolve_runner(run_fn)  # fail fast (StudyError) rather than record every run as failed
+    meta = study.meta()
+    meta["runner"] = run_fn if isinstance(run_fn, str) or run_fn is None else (
+        f"{getattr(run_fn, '__module__', '?')}:{getattr(run_fn, '__qualname__', '?')}"
+    )
+    write_study(out, meta)
+    remove_stale_tmp(out)
+
+    t_start = time.perf_counter()
+    scan = scan_runs(out)
+    summary = RunSummary(total=len(study.runs), invalid_files=[str(p) for p in scan.invalid])
+    todo: list[RunSpec] = []
+    attempts: dict[str, int] = {}
+    for r in study.runs:
+        prev = scan.records.get(r.id)
+        if prev is None:
+            todo.append(r)
+            attempts[r.id] = 1
+        elif prev["status"] == "ok":
+            summary.skipped_ok += 1
+        elif retry_failed:
+            todo.append(r)
+            attempts[r.id] = int(prev.get("attempt") or 1) + 1
+        else:
+            summary.skipped_failed += 1
+
+    def artifact_dir(r: RunSpec) -> str | None:
+        return str(out / "artifacts" / r.id) if artifacts else None
+
+    bar = _Progress(len(study.runs), summary.skipped_ok + summary.skipped_failed,
+                    progress, console)
+
+    def finish(r: RunSpec, res: dict[str, Any]) -> None:
+        rec = {
+            "schema": RECORD_SCHEMA,
+            "id": r.id,
+            "study": study.name,
+            "status": res["status"],
+            "params": r.params,
+            "seed": r.seed,
+            "attempt": attempts[r.id],
+            "case": r.case,
+            "record": res.get("record"),
+            "error": res.get("error"),
+            "traceback": res.get("traceback"),
+            "started": res.get("started"),
+            "finished": res.get("finished"),
+            "elapsed_s": res.get("elapsed_s"),
+            "host": res.get("host"),
+            "pid": res.get("pid"),
+            "artifacts": (f"artifacts/{r.id}" if artifacts else None),
+        }
+        write_record(out, rec)
+        summary.ran += 1
+        if res["status"] == "ok":
+            summary.ok += 1
+            bar.ok += 1
+        else:
+            summary.failed += 1
+            bar.failed += 1
+        bar.update(advance=1)
+
+    try:
+        if dask_address is not None:
+            _run_dask(todo, dask_address, run_fn, artifacts, artifact_dir, finish, bar)
+        else:
+            n = workers if workers is not None else (os.cpu_count() or 1)
+            if n <= 1 or len(todo) <= 1:
+                for r in todo:
+                    bar.running = 1
+                    bar.update()
+                    finish(r, execute_run(run_fn, r.case, artifact_dir(r), artifacts))
+                bar.running = 0
+            else:
+                _run_pool(todo, n, run_fn, artifacts, artifact_dir, finish, bar)
+    except KeyboardInterrupt:
+        summary.interrupted = True
+        raise
+    finally:
+        bar.running = 0
+        bar.update()
+        bar.close()
+        summary.wall_s = time.perf_counter() - t_start
+        if write_results:
+            try:
+                summary.table = write_table(out)
+            except Exception:  # pragma: no cover - the table is a convenience
+                summary.table = None
+    return summary
+
+
+def _init_worker(path: list[str]) -> None:
+    """Give spawned workers the driver's import path (so 'module:function' runners resolve)."""
+    for p in reversed(path):
+        if p not in sys.path:
+            sys.path.insert(0, p)
+
+
+def _run_pool(
+    todo: list[RunSpec],
+    workers: int,
+    run_fn: RunFn | str | None,
+    artifacts: bool,
+    artifact_dir: Callable[[RunSpec], str | None],
+    finish: Callable[[RunSpec, dict[str, Any]], None],
+    bar: _Progress,
+) -> None:
+    """Bounded submission to a process pool: at most ``workers`` runs in flight."""
+    queue = list(reversed(todo))
+    crashes: dict[str, int] = {}
+    while queue:
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                   initargs=(list(sys.path),))
+        inflight: dict[Future, RunSpec] = {}
+        broken = False
+        try:
+            while queue or inflight:
+                while queue and len(inflight) < workers and not broken:
+                    r = queue.pop()
+                    try:
+                        fut = pool.submit(execute_run, run_fn, r.case, artifact_dir(r), artifacts)
+                    except BrokenProcessPool:
+                        queue.append(r)
+                        broken = True
+                        break
+                    inflight[fut] = r
+                bar.running = len(inflight)
+                bar.update()
+                if not inflight:
+                    break
+                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    r = inflight.pop(fut)
+                    try:
+                        res = fut.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        crashes[r.id] = crashes.get(r.id, 0) + 1
+                        if crashes[r.id] >= _MAX_CRASHES:
+                            finish(r, _crash_result("worker process died (BrokenProcessPool)"))
+                        else:
+                            queue.append(r)
+                        continue
+                    except Exception as err:  # e.g. unpicklable result
+                        res = _crash_result(f"{type(err).__name__}: {err}")
+                    finish(r, res)
+                if broken and not inflight:
+                    break
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
+        if not broken:
+            break
+
+
+def _crash_result(error: str) -> dict[str, Any]:
+    now = _now()
+    return {"status": "failed", "record": None, "error": error, "traceback": None,
+            "started": None, "finished": now, "elapsed_s": None, "host": None, "pid": None}
+
+
+def _run_dask(
+    todo: Iterable[RunSpec],
+    address: Any,
+    run_fn: RunFn | str | None,
+    artifacts: bool,
+    artifact_dir: Callable[[RunSpec], str | None],
+    finish: Callable[[RunSpec, dict[str, Any]], None],
+    bar: _Progress,
+) -> None:
+    """Submit every run to a dask.distributed scheduler; write results as they complete."""
+    from distributed import Client, as_completed
+
+    todo = list(todo)
+    if not todo:
+        return
+    own = not isinstance(address, Client)
+    client = Client(address) if own else address
+    try:
+        futs = {}
+        for r in todo:
+            fut = client.submit(execute_run, run_fn, r.case, artifact_dir(r), artifacts,
+                                key=f"undulate-run-{r.id}-{time.time_ns()}", pure=False)
+            futs[fut] = r
+        bar.running = len(futs)
+        bar.update()
+        try:
+            for fut in as_completed(list(futs)):
+                r = futs[fut]
+                try:
+                    res = fut.result()
+                except Exception as err:  # KilledWorker, lost worker, ...
+                    res = _crash_result(f"{type(err).__name__}: {err}")
+                bar.running -= 1
+                finish(r, res)
+        except BaseException:
+            client.cancel(list(futs))
+            raise
+    finally:
+        if own:
+            client.close()

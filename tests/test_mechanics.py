@@ -1,0 +1,117 @@
+"""Verification of the energies: patch test, derivatives, fabric bending calibration."""
+
+import numpy as np
+import pytest
+
+from undulate.mechanics.assemble import Assembly
+from undulate.mechanics.build import (
+    RodSection,
+    fabric_groups,
+    lame_plane_stress,
+    lateral_stretch,
+    rod_groups,
+)
+from undulate.mesh import build_mesh
+from undulate.model import Case
+
+
+def _small_mesh(L=20.0, margin=4.0, dx=1.0):
+    c = Case.model_validate(
+        {"rods": {"L": L}, "fabric": {"margin_x": margin, "margin_y": margin},
+         "mesh": {"dx_rod": dx, "dx_far": 2.0, "dy_far": 2.0}}
+    )
+    ly = lateral_stretch(0.5, 0.3)
+    m = build_mesh(c.segments(), 1.0, c.fabric_extent(), eps0=0.5, lam_y=ly, dx_rod=dx,
+                   dx_far=2.0, dy_far=2.0, grading=1.5)
+    return c, m
+
+
+def test_patch_uniform_stretch_energy_and_stress():
+    """A homogeneously stretched sheet stores exactly t * A * W and carries uniaxial stress."""
+    E, nu, t = 0.45, 0.3, 0.4
+    _, m = _small_mesh()
+    groups = fabric_groups(m, E, nu, t)
+    lx = 1.3
+    ly = lateral_stretch(lx - 1.0, nu)
+    X3 = np.c_[m.X, np.zeros(m.n_nodes)]
+    x = X3 * [lx, ly, 1.0]
+    free = np.zeros((m.n_nodes, 3), bool)
+    asm = Assembly(m.n_nodes, groups, ~free)
+    mu, lam2 = lame_plane_stress(E, nu)
+    J = lx * ly
+    W = 0.5 * mu * (lx**2 + ly**2 - 2 - 2 * np.log(J)) + 0.5 * lam2 * np.log(J) ** 2
+    area = (m.xs[-1] - m.xs[0]) * (m.ys[-1] - m.ys[0])
+    assert asm.energy(x) == pytest.approx(t * area * W, rel=1e-10)
+    # interior nodes are in equilibrium (homogeneous state); the edge x = max carries the
+    # uniaxial force  N = t * width * P_11, with P_11 = dW/dlx (1st Piola) and dW/dly = 0
+    g = asm.gradient_full(x)
+    interior = np.ones(m.n_nodes, bool)
+    interior[m.left] = interior[m.right] = False
+    on_y_edges = np.isclose(m.X[:, 1], m.ys[0]) | np.isclose(m.X[:, 1], m.ys[-1])
+    assert np.max(np.abs(g[interior & ~on_y_edges])) < 1e-10
+    P11 = mu * (lx - 1 / lx) + lam2 * np.log(J) / lx
+    assert g[m.right, 0].sum() == pytest.approx(t * (m.ys[-1] - m.ys[0]) * P11, rel=1e-9)
+    # free long edges carry no transverse force
+    assert abs(g[on_y_edges & interior, 1].sum()) < 1e-10
+
+
+def test_small_strain_limit_is_linear_plane_stress():
+    """For small uniaxial strain the law reduces to sigma = E eps, eps_y = -nu eps."""
+    eps = 1e-5
+    nu = 0.3
+    ly = lateral_stretch(eps, nu)
+    assert (ly - 1.0) / eps == pytest.approx(-nu, rel=1e-3)
+
+
+def test_gradient_and_hessian_match_finite_differences():
+    c, m = _small_mesh(L=10.0, margin=3.0)
+    ly = lateral_stretch(0.5, 0.3)
+    X3 = np.c_[m.X, np.zeros(m.n_nodes)]
+    xp = X3 * [1.5, ly, 1.0]
+    sec = RodSection(h=0.3, b=1.0, E_B=3000.0, nu_B=0.35, t=0.4)
+    groups = fabric_groups(m, 0.45, 0.3, 0.4) + rod_groups(m.rods, xp, sec)
+    fixed = np.zeros((m.n_nodes, 3), bool)
+    fixed[m.left] = fixed[m.right] = True
+    asm = Assembly(m.n_nodes, groups, fixed)
+    rng = np.random.default_rng(1)
+    x = xp + rng.normal(scale=0.05, size=xp.shape)
+    g, H = asm.gradient_hessian(x)
+    u = asm.free(x)
+    d = rng.normal(size=u.size)
+    h = 1e-6
+    fd = (asm.energy(asm.full(u + h * d, x)) - asm.energy(asm.full(u - h * d, x))) / (2 * h)
+    assert fd == pytest.approx(g @ d, rel=1e-6)
+    Hs = asm.symmetric(H)
+    gp = asm.gradient(asm.full(u + h * d, x))
+    gm = asm.gradient(asm.full(u - h * d, x))
+    err = np.linalg.norm((gp - gm) / (2 * h) - Hs @ d) / np.linalg.norm(Hs @ d)
+    assert err < 1e-6
+
+
+def test_rods_are_stress_free_at_printing():
+    _, m = _small_mesh()
+    ly = lateral_stretch(0.5, 0.3)
+    xp = np.c_[m.X, np.zeros(m.n_nodes)] * [1.5, ly, 1.0]
+    sec = RodSection(h=0.5, b=1.0, E_B=3000.0, nu_B=0.35, t=0.4)
+    asm = Assembly(m.n_nodes, rod_groups(m.rods, xp, sec), np.zeros((m.n_nodes, 3), bool))
+    assert asm.energy(xp) == pytest.approx(0.0, abs=1e-20)
+    assert np.max(np.abs(asm.gradient(xp))) < 1e-9
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_fabric_bending_cylinder(axis):
+    """Bending a flat sheet into a cylinder of radius R stores D/2 * A / R^2 (within 10 %)."""
+    E, nu, t = 0.45, 0.0, 0.4
+    _, m = _small_mesh(L=30.0, margin=6.0, dx=0.5)
+    groups = [g for g in fabric_groups(m, E, nu, t) if g.name == "fabric_bending"]
+    R = 200.0
+    X = m.X
+    s = X[:, axis]
+    x = np.zeros((m.n_nodes, 3))
+    x[:, axis] = R * np.sin(s / R)
+    x[:, 1 - axis] = X[:, 1 - axis]
+    x[:, 2] = R * (1 - np.cos(s / R))
+    asm = Assembly(m.n_nodes, groups, np.ones((m.n_nodes, 3), bool))
+    D = E * t**3 / 12.0
+    area = (m.xs[-1] - m.xs[0]) * (m.ys[-1] - m.ys[0])
+    assert asm.energy(x) == pytest.approx(0.5 * D * area / R**2, rel=0.10)

@@ -1,0 +1,82 @@
+"""The ``undulate study`` CLI through typer's CliRunner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from undulate.interfaces.cli_study import study_app
+
+app = typer.Typer()
+app.add_typer(study_app, name="study")
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def _fake_runner(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("UNDULATE_STUDY_RUNNER", "_study_fakes:fake_run")
+
+
+def test_unknown_preset_is_one_clear_error(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["study", "run", "bogus", "--out", str(tmp_path / "x")])
+    assert res.exit_code == 2
+    text = res.output
+    assert "unknown preset 'bogus'" in text
+    for name in ("single-rod-h", "single-rod-eps0", "parallel-phase-diagram"):
+        assert name in text
+
+
+def test_run_status_figures_report(tmp_path: Path) -> None:
+    out = tmp_path / "st"
+    res = runner.invoke(app, ["study", "run", "single-rod-h", "--quick", "--out", str(out),
+                              "--workers", "1", "--seeds", "2", "--no-artifacts"])
+    assert res.exit_code == 0, res.output
+    assert "40 runs" in res.output and "ran 40" in res.output
+    assert not (out / "artifacts").exists()
+    res = runner.invoke(app, ["study", "run", "single-rod-h", "--quick", "--out", str(out),
+                              "--workers", "1", "--seeds", "2"])
+    assert res.exit_code == 0 and "ran 0" in res.output and "skipped 38 done" in res.output
+
+    res = runner.invoke(app, ["study", "status", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "total" in res.output and "40" in res.output and "pending" in res.output
+    assert (out / "results.parquet").is_file()
+
+    res = runner.invoke(app, ["study", "figures", str(out)])
+    assert res.exit_code == 0, res.output
+    assert (out / "figures" / "single_rod_h.png").is_file()
+    assert (out / "figures" / "single_rod_h.pdf").is_file()
+
+    res = runner.invoke(app, ["study", "report", str(out)])
+    assert res.exit_code == 0, res.output
+    text = (out / "report.md").read_text()
+    assert "eq. (1) slope" in text and "figures/single_rod_h.png" in text
+
+
+def test_status_shows_failures_and_retry(tmp_path: Path) -> None:
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('[base.rods]\nL = 60.0\n[sweep]\n"rods.h" = [0.2, 0.42, 1.3]\n')
+    out = tmp_path / "o"
+    res = runner.invoke(app, ["study", "run", str(sweep), "--out", str(out), "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    assert "2 failed" in res.output
+    res = runner.invoke(app, ["study", "status", str(out)])
+    assert "fake divergence" in res.output and "failures" in res.output
+    res = runner.invoke(app, ["study", "run", str(sweep), "--out", str(out), "--workers", "1"])
+    assert "use --retry-failed" in res.output
+    res = runner.invoke(app, ["study", "run", str(sweep), "--out", str(out), "--workers", "1",
+                              "--retry-failed"])
+    assert "ran 2" in res.output
+
+
+def test_bad_sweep_and_not_a_study(tmp_path: Path) -> None:
+    sweep = tmp_path / "s.toml"
+    sweep.write_text('[sweep]\n"rods.h" = [0.2, 50.0]\n')
+    res = runner.invoke(app, ["study", "run", str(sweep), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "rods.h" in res.output and "run 2/2" in res.output
+    for cmd in ("status", "figures", "report"):
+        res = runner.invoke(app, ["study", cmd, str(tmp_path / "nothing")])
+        assert res.exit_code == 2 and "not a study directory" in res.output

@@ -1,0 +1,91 @@
+"""Figures and report from fake (theory-shaped) data."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import _study_fakes as fakes
+import pytest
+
+from undulate.study import collect, get_preset, run_study
+from undulate.study.derived import (
+    arcs_beat_sines,
+    fit_eps0_exponent,
+    fit_l_slope,
+    hstar,
+    hstar_ratios,
+    theory,
+)
+from undulate.study.figures import make_figures
+from undulate.study.report import write_report
+
+
+def _run(tmp_path_factory: pytest.TempPathFactory, name: str, quick: bool) -> Path:
+    d = tmp_path_factory.mktemp(name)
+    run_study(get_preset(name, quick=quick), d, run_fn=fakes.fake_run, workers=1,
+              progress=False, artifacts=False)
+    return d
+
+
+@pytest.fixture(scope="module")
+def single_h(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _run(tmp_path_factory, "single-rod-h", False)
+
+
+@pytest.fixture(scope="module")
+def parallel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _run(tmp_path_factory, "parallel-phase-diagram", True)
+
+
+def test_theory_functions_match_spec() -> None:
+    th = theory()
+    ib = 0.3**3 * 1.0 / 12
+    l_ref = (24 * math.sqrt(6) * 3000 * ib / (0.45 * 0.4)) ** (1 / 3) * 0.5**-0.5
+    assert float(th["l"](0.3, 0.5, b=1.0, E_B=3000.0, E=0.45, t=0.4)) == pytest.approx(l_ref)
+    a_ref = 1 / (2 * 0.5) * (3000 / (3 * 0.45 * 0.4)) ** (1 / 3) * 0.3
+    assert float(th["a"](0.3, 0.5)) == pytest.approx(a_ref)
+    assert float(th["s_hat"](0.3, 0.5)) == pytest.approx(2 * a_ref * 1.5)
+
+
+def test_single_rod_figures_and_fits(single_h: Path) -> None:
+    text = write_report(single_h).read_text()  # makes the figures too
+    made = sorted(p.name for p in (single_h / "figures").iterdir())
+    assert made == [f"{n}.{e}" for n in ("quantized_flattening", "single_rod_h")
+                    for e in ("pdf", "png")]
+    assert all(p.stat().st_size > 1000 for p in (single_h / "figures").iterdir())
+    assert "eq. (1) slope" in text and "Arcs vs sines" in text and "Bundling" not in text
+    assert "fake divergence" in text and "![single_rod_h](figures/single_rod_h.png)" in text
+    df = collect(single_h)
+    fit = fit_l_slope(df)
+    assert fit is not None and fit["n_min"] == 7
+    assert fit["slope_origin"] == pytest.approx(fit["slope_eq1"], rel=0.1)
+    arcs = arcs_beat_sines(df)
+    assert arcs is not None and arcs["n"] == 95 and 0 < arcs["fraction"] <= 1
+    assert fit_eps0_exponent(df) is None  # eps0 not swept
+
+
+def test_eps0_figure_and_exponent(tmp_path_factory: pytest.TempPathFactory) -> None:
+    d = _run(tmp_path_factory, "single-rod-eps0", False)
+    made = make_figures(d)
+    assert set(made) == {"l_vs_eps0"}
+    exp = fit_eps0_exponent(collect(d))
+    assert exp is not None and -0.8 < exp["exponent"] < -0.2 and exp["n_points"] == 8
+    assert "exponent" in write_report(d).read_text()
+
+
+def test_parallel_figures_hstar_and_bundling(parallel: Path) -> None:
+    df = collect(parallel)
+    hs = hstar(df, 1)
+    assert list(hs.index) == [0.0, 5.0, 10.0, 25.0, 50.0]
+    assert hs[0.0] <= hs[50.0]  # bundled rods reach n = 1 at smaller h
+    ratios = hstar_ratios(df)
+    assert [r["transition"] for r in ratios] == ["3->1", "5->3", "7->5"]
+    assert ratios[0]["bundling"] == pytest.approx(5 ** (1 / 3))
+    assert ratios[0]["N"] == 5
+    text = write_report(parallel).read_text()
+    for name in ("phase_diagram", "master_curve", "quantized_flattening"):
+        assert (parallel / "figures" / f"{name}.png").is_file()
+        assert f"figures/{name}.png" in text
+    assert not (parallel / "figures" / "single_rod_h.png").exists()
+    assert "| 3->1 |" in text and "N^(1/3)" in text and "figures/phase_diagram.png" in text

@@ -1,0 +1,166 @@
+"""The study runner: records, failures, resume, retry, atomicity, workers, storage table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import _study_fakes as fakes
+import pandas as pd
+import pytest
+
+from undulate.study import StudyError, build_study, collect, get_preset, run_study, scan_runs
+from undulate.study.runner import execute_run
+from undulate.study.storage import atomic_write_json, read_record
+
+
+def _small_study(hs: list[float], name: str = "t"):
+    base = {"rods": {"N": 1, "L": 60.0}, "mesh": {"dx_rod": 2.0, "dx_far": 6.0}}
+    return build_study(name, base, {"rods.h": hs}, kind="sweep")
+
+
+def _records(d: Path) -> dict[str, dict]:
+    return scan_runs(d).records
+
+
+def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
+    study = _small_study([0.2, 0.42, 0.6])
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    assert (s.ran, s.ok, s.failed) == (3, 2, 1)
+    recs = _records(tmp_path)
+    assert len(recs) == 3 and {p.name for p in (tmp_path / "runs").iterdir()} == {
+        f"{r.id}.json" for r in study.runs
+    }
+    bad = next(r for r in recs.values() if r["status"] == "failed")
+    assert bad["params"] == {"rods.h": 0.42}
+    assert bad["error"].startswith("RuntimeError: fake divergence")
+    assert "fake_run" in bad["traceback"] and bad["record"] is None
+    good = next(r for r in recs.values() if r["status"] == "ok")
+    assert good["record"]["n_mode"] >= 1 and good["seed"] == 0 and good["attempt"] == 1
+    assert good["elapsed_s"] >= 0 and good["case"]["rods"]["h"] in (0.2, 0.6)
+    # artifacts directory passed as `out`
+    assert (tmp_path / "artifacts" / good["id"] / "shape.txt").is_file()
+    meta = json.loads((tmp_path / "study.json").read_text())
+    assert meta["name"] == "t" and meta["n_runs"] == 3 and len(meta["runs"]) == 3
+    assert (tmp_path / "results.parquet").is_file()
+
+
+def test_resume_skips_and_retry_failed(tmp_path: Path) -> None:
+    study = _small_study([0.2, 0.42, 0.6])
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    before = {i: r["finished"] for i, r in _records(tmp_path).items()}
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    assert (s.ran, s.skipped_ok, s.skipped_failed) == (0, 2, 1)
+    assert {i: r["finished"] for i, r in _records(tmp_path).items()} == before
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False,
+                  retry_failed=True)
+    assert (s.ran, s.failed, s.skipped_ok) == (1, 1, 2)
+    bad = [r for r in _records(tmp_path).values() if r["status"] == "failed"]
+    assert len(bad) == 1 and bad[0]["attempt"] == 2
+    # a run function that now succeeds turns the failure into ok
+    s = run_study(study, tmp_path, run_fn=fakes.slow_run, workers=1, progress=False,
+                  retry_failed=True)
+    assert s.ok == 1 and all(r["status"] == "ok" for r in _records(tmp_path).values())
+
+
+def test_invalid_and_tmp_files_are_ignored_and_redone(tmp_path: Path) -> None:
+    study = _small_study([0.2, 0.6])
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    a, b = study.runs
+    pa = tmp_path / "runs" / f"{a.id}.json"
+    text = pa.read_text()
+    pa.write_text(text[: len(text) // 2])  # truncated record (e.g. a non-atomic writer)
+    (tmp_path / "runs" / f".{b.id}.json.x1.tmp").write_text("{half")
+    (tmp_path / "runs" / "deadbeef00000000.json").write_text('{"id": "other"}')
+    scan = scan_runs(tmp_path)
+    assert set(scan.records) == {b.id}
+    assert len(scan.invalid) == 2 and len(scan.tmp) == 1
+    assert read_record(pa) is None
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    assert s.ran == 1 and len(s.invalid_files) == 2
+    assert read_record(pa)["status"] == "ok"
+
+
+def test_atomic_write_leaves_old_file_on_error(tmp_path: Path) -> None:
+    p = tmp_path / "runs" / "x.json"
+    atomic_write_json(p, {"v": 1})
+    with pytest.raises(ValueError):
+        atomic_write_json(p, {"v": float("nan")})  # not JSON: nothing replaced
+    assert json.loads(p.read_text()) == {"v": 1}
+    assert [q.name for q in p.parent.iterdir()] == ["x.json"]
+
+
+def test_process_pool_matches_in_process(tmp_path: Path) -> None:
+    study = _small_study([0.1, 0.2, 0.3, 0.42, 0.5, 0.6, 0.7])
+    s = run_study(study, tmp_path / "pool", run_fn=fakes.fake_run, workers=2, progress=False,
+                  artifacts=False)
+    assert (s.ok, s.failed) == (6, 1)
+    s1 = run_study(study, tmp_path / "seq", run_fn=fakes.fake_run, workers=1, progress=False,
+                   artifacts=False)
+    assert (s1.ok, s1.failed) == (6, 1)
+    ra, rb = _records(tmp_path / "pool"), _records(tmp_path / "seq")
+    assert set(ra) == set(rb)
+    for i in ra:
+        assert ra[i]["record"] == rb[i]["record"]
+        assert ra[i]["artifacts"] is None
+    assert not (tmp_path / "pool" / "artifacts").exists()
+
+
+def test_string_runner_and_worker_crash(tmp_path: Path) -> None:
+    study = _small_study([0.3, 0.5, 0.7])
+    s = run_study(study, tmp_path, run_fn="_study_fakes:crash_run", workers=2, progress=False,
+                  artifacts=False)
+    recs = _records(tmp_path)
+    assert len(recs) == 3 and (s.ok, s.failed) == (2, 1)
+    crashed = [r for r in recs.values() if r["status"] == "failed"]
+    assert crashed[0]["params"]["rods.h"] == 0.5 and "worker process died" in crashed[0]["error"]
+
+
+def test_execute_run_never_raises() -> None:
+    res = execute_run("no_such_module:f", {"rods": {"h": 0.3}}, None, False)
+    assert res["status"] == "failed" and "cannot import" in res["error"]
+    res = execute_run(fakes.fake_run, {"rods": {"h": -1.0}}, None, False)
+    assert res["status"] == "failed" and "rods.h" in res["error"]
+
+
+def test_other_study_in_same_dir_refused(tmp_path: Path) -> None:
+    run_study(_small_study([0.2], name="a"), tmp_path, run_fn=fakes.fake_run, workers=1,
+              progress=False)
+    with pytest.raises(StudyError, match="already holds study 'a'"):
+        run_study(_small_study([0.2], name="b"), tmp_path, run_fn=fakes.fake_run, workers=1,
+                  progress=False)
+
+
+def test_collect_table(tmp_path: Path) -> None:
+    study = get_preset("parallel-phase-diagram", quick=True)
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False, artifacts=False)
+    df = collect(tmp_path)
+    assert len(df) == 35
+    for col in ("run_id", "status", "seed", "rods.h", "rods.s", "h", "s", "N", "eps0", "l_mean",
+                "family", "elapsed_s", "error"):
+        assert col in df, col
+    s0 = df[df["rods.s"] == 0.0]
+    assert (s0["N"] == 1).all() and (s0["b"] == 5.0).all()
+    assert list(df["run_id"]) == [r.id for r in study.runs]  # study order
+    back = pd.read_parquet(tmp_path / "results.parquet")
+    assert len(back) == 35 and set(back["status"]) <= {"ok", "failed"}
+
+
+def test_progress_bar_on_a_terminal(tmp_path: Path) -> None:
+    import io
+
+    from rich.console import Console
+
+    buf = io.StringIO()
+    console = Console(file=buf, force_terminal=True, width=120)
+    s = run_study(_small_study([0.2, 0.42, 0.6]), tmp_path, run_fn=fakes.fake_run, workers=1,
+                  progress=True, console=console)
+    assert s.ran == 3
+    text = buf.getvalue()
+    assert "3/3" in text and "failed" in text and "running" in text
+
+
+def test_unresolvable_runner_fails_fast(tmp_path: Path) -> None:
+    with pytest.raises(StudyError, match="cannot import"):
+        run_study(_small_study([0.2]), tmp_path, run_fn="no_such_module:f", progress=False)
+    assert not list((tmp_path / "runs").glob("*.json"))
