@@ -54,6 +54,17 @@ class ElementGroup:
 
         if self.chunk <= 0:
             self.chunk = 2048 if self.k <= 4 else 256
+        self._pad()
+
+    def set_params(self, *params: np.ndarray) -> None:
+        """Replace the element parameters (same shapes; the sparsity pattern is unchanged)."""
+        new = tuple(np.asarray(p, dtype=np.float64) for p in params)
+        if [p.shape for p in new] != [p.shape for p in self.params]:
+            raise ValueError(f"group {self.name}: parameter shapes must not change")
+        self.params = new
+        self._pad()
+
+    def _pad(self) -> None:
         n = self.n_el
         n_pad = -(-n // self.chunk) * self.chunk
         idx = np.concatenate([np.arange(n), np.zeros(n_pad - n, dtype=np.int64)])

@@ -66,3 +66,9 @@ def body_force(x: jnp.ndarray, f: jnp.ndarray) -> jnp.ndarray:
 def winkler_foundation(x: jnp.ndarray, k: jnp.ndarray, z0: jnp.ndarray) -> jnp.ndarray:
     """Elastic (Winkler) support of one node (1, 3) out of plane: 0.5 k (z - z0)^2, k in N/mm."""
     return 0.5 * k * (x[0, 2] - z0) ** 2
+
+
+def inertia(x: jnp.ndarray, m_h2: jnp.ndarray, x_hat: jnp.ndarray) -> jnp.ndarray:
+    """Implicit-Euler inertia term of one node: m / (2 dt^2) |x - x_hat|^2 (x_hat: predicted)."""
+    r = x[0] - x_hat
+    return 0.5 * m_h2 * jnp.dot(r, r)

@@ -21,6 +21,7 @@ never returned as a shape.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,7 +75,9 @@ def _lowest_mode(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int, rng: np.rando
     Sm = sp.diags(S)
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)), dtype=float)
     try:
-        w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=1e-4, maxiter=40)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "not reaching the requested tolerance": fine here
+            w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=1e-4, maxiter=40)
         return float(w[0]), np.ravel(V[:, 0])
     except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
         return float("nan"), np.ravel(X)

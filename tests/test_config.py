@@ -1,0 +1,62 @@
+"""Validation of case descriptions: one clear error naming the field and the allowed range."""
+
+import math
+
+import pytest
+
+from undulate.model import Case, ConfigError, case_from_dict, load_case
+
+
+def test_defaults_are_spec_defaults():
+    c = Case()
+    assert (c.fabric.E, c.fabric.t, c.rods.E_B, c.rods.b, c.rods.L, c.release.eps0) == (
+        0.45, 0.4, 3000.0, 1.0, 100.0, 0.5)
+
+
+@pytest.mark.parametrize(
+    "data, field, words",
+    [
+        ({"rods": {"h": 0.0}}, "rods.h", "greater than 0"),
+        ({"rods": {"h": -1.0}}, "rods.h", "gt 0"),
+        ({"release": {"eps0": 0.0}}, "release.eps0", "greater than 0"),
+        ({"release": {"eps0": math.nan}}, "release.eps0", "finite"),
+        ({"fabric": {"nu": 0.5}}, "fabric.nu", "lt 0.5"),
+        ({"rods": {"hh": 1.0}}, "rods.hh", "Extra inputs"),
+        ({"bogus": 1}, "bogus", "Extra inputs"),
+        ({"rods": {"N": 3, "s": 0.0}}, "rods", "s: must be > 0"),
+        ({"rods": {"segments": [{"start": [0, 0], "length": 10, "direction": [0, 1]}]}},
+         "rods.segments.0", "only rods along +x"),
+        ({"rods": {"b": 2.0, "segments": [{"start": [0, 0], "length": 10},
+                                          {"start": [5, 1], "length": 10}]}},
+         "case", "overlap"),
+        ({"mesh": {"dx_rod": 15.0, "dx_far": 20.0}, "rods": {"L": 20}}, "case", "mesh.dx_rod"),
+    ],
+)
+def test_bad_values_name_the_field(data, field, words):
+    with pytest.raises(ConfigError) as err:
+        case_from_dict(data)
+    msg = str(err.value)
+    assert msg.startswith(field) or f"\n{field}" in msg or field in msg.split(":")[0]
+    assert words in msg
+
+
+def test_load_case_file_errors(tmp_path):
+    with pytest.raises(ConfigError, match="no such file"):
+        load_case(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[rods\nh = 1")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_case(bad)
+    ok = tmp_path / "ok.toml"
+    ok.write_text("[rods]\nh = 0.5\nN = 5\ns = 2.5\n")
+    c = load_case(ok)
+    assert len(c.segments()) == 5
+    ys = [s[1] for s in c.segments()]
+    assert ys[1] - ys[0] == pytest.approx(c.rods.b + 2.5)
+
+
+def test_examples_validate():
+    from pathlib import Path
+
+    for p in sorted(Path(__file__).parents[1].joinpath("examples").glob("*.toml")):
+        load_case(p)
