@@ -98,7 +98,8 @@ def _strip_mesh(L0, b, dx):
     cols = np.arange(nx)
     chain = RodChain(p=nx + cols, qm=cols, qp=2 * nx + cols)
     return FabricMesh(X=X, tris=np.array(tris), xs=xs, ys=ys, rods=[chain],
-                      left=np.array([0, nx, 2 * nx]), right=np.array([nx - 1, 2 * nx - 1, 3 * nx - 1]))
+                      left=np.array([0, nx, 2 * nx]),
+                      right=np.array([nx - 1, 2 * nx - 1, 3 * nx - 1]))
 
 
 def test_bilayer_curvature_matches_timoshenko():

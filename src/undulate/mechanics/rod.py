@@ -1,4 +1,4 @@
-"""Energies of a rod bonded on top of the fabric: a discrete elastic rod whose frame is the fabric's.
+"""Energies of a rod bonded on top of the fabric: a discrete elastic rod framed by the fabric.
 
 Kinematics (the bond). The rod's nodes sit above fabric nodes: for rod node k, ``p`` is the
 fabric node under the rod's centre line and ``qm``/``qp`` the fabric nodes under the two edges of

@@ -106,7 +106,7 @@ def _spacing_at(x: float, fine: dict[tuple[float, float], float], coarse: float)
 def _graded_interval(
     a: float, b: float, h_a: float, h_b: float, coarse: float, g: float
 ) -> np.ndarray:
-    """Points from a to b whose spacing starts near h_a, ends near h_b, grows by g, caps at coarse."""
+    """Points from a to b: spacing starts near h_a, ends near h_b, grows by g, caps at coarse."""
     left = [a]
     right = [b]
     ha, hb = h_a * g, h_b * g
