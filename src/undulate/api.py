@@ -107,7 +107,7 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
 
 def _merge_rod_metrics(out: Path, ana: dict[str, Any]) -> None:
     """Put the per-rod analysis keys into metrics.json's ``rods`` entries."""
-    from .interfaces.output import atomic_write_text, to_jsonable
+    from .study.storage import atomic_write_json, jsonable
 
     p = out / "metrics.json"
     m = json.loads(p.read_text())
@@ -115,4 +115,4 @@ def _merge_rod_metrics(out: Path, ana: dict[str, Any]) -> None:
         for key in ("l", "lam", "a", "R", "R_up", "R_down", "n", "r2_arcs", "r2_sine",
                     "quality"):
             entry[key] = r.get(key)
-    atomic_write_text(p, json.dumps(to_jsonable(m), indent=1))
+    atomic_write_json(p, jsonable(m))

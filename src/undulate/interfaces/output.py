@@ -13,48 +13,14 @@ Directory layout written by :func:`write_result`::
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import tempfile
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from .. import __version__
+from ..study.storage import atomic_write_json, jsonable
 
-__all__ = ["write_result", "rod_summary", "to_jsonable", "atomic_write_text"]
-
-
-def to_jsonable(obj: Any) -> Any:
-    """Plain JSON types; NaN/inf become None (never written as NaN)."""
-    if isinstance(obj, dict):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [to_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return to_jsonable(obj.tolist())
-    if isinstance(obj, np.integer | bool | np.bool_):
-        return obj.item() if isinstance(obj, np.generic) else obj
-    if isinstance(obj, float | np.floating):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    return obj
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write via a temporary file in the same folder and rename (never half-written)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+__all__ = ["write_result", "rod_summary"]
 
 
 def rod_summary(cl: np.ndarray, offset: float) -> dict:
@@ -155,7 +121,7 @@ def write_result(result, out: Path, *, extra: dict | None = None, plots: bool = 
     if extra:
         metrics.update(extra)
     np.savez(out / "centerlines.npz", **{f"rod{k}": c for k, c in enumerate(cls)})
-    atomic_write_text(out / "metrics.json", json.dumps(to_jsonable(metrics), indent=1))
+    atomic_write_json(out / "metrics.json", jsonable(metrics))
     if vtu:
         _write_vtu(out / "final.vtu", result, result.x_final, cls)
         _write_vtu(out / "printed.vtu", result, result.x_printed, result.centerlines_printed)
