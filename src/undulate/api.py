@@ -102,6 +102,11 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
         write_result(result, Path(out), extra={"analysis": ana, "family": ana["family"]},
                      plots=artifacts, vtu=artifacts)
         _merge_rod_metrics(Path(out), ana)
+        if artifacts:
+            from .analysis import plot_fits
+
+            for k, (cl, r) in enumerate(zip(result.centerlines, ana["rods"], strict=True)):
+                plot_fits(cl, r, Path(out) / f"rod_{k}_fits.png", title=f"rod {k}")
     return rec
 
 

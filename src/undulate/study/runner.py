@@ -13,6 +13,7 @@ most the runs that were in flight; re-running the same command resumes.
 from __future__ import annotations
 
 import importlib
+import multiprocessing
 import os
 import socket
 import sys
@@ -341,8 +342,10 @@ def _run_pool(
     queue = list(reversed(todo))
     crashes: dict[str, int] = {}
     while queue:
+        # spawn, not fork: the engine uses JAX, which is multithreaded (fork can deadlock)
         pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                   initargs=(list(sys.path),))
+                                   initargs=(list(sys.path),),
+                                   mp_context=multiprocessing.get_context("spawn"))
         inflight: dict[Future, RunSpec] = {}
         broken = False
         try:
