@@ -17,11 +17,13 @@ ignored by :func:`scan_runs` and reported; their runs count as pending.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,17 +80,19 @@ def jsonable(obj: Any) -> Any:
     raise TypeError(f"value of type {type(obj).__name__} is not JSON-serialisable")
 
 
-def atomic_write_json(path: Path, data: Any) -> None:
-    """Write JSON to ``path`` atomically (tmp file in the same directory, fsync, os.replace)."""
+@contextlib.contextmanager
+def atomic_path(path: Path) -> Iterator[str]:
+    """Yield a temporary file name next to ``path``; on success it replaces ``path``.
+
+    The temporary file lives in the same directory (so ``os.replace`` is atomic) and is removed
+    if the block raises: a reader sees the old file or the complete new one, never a part.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(data, indent=1, sort_keys=False, allow_nan=False)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -104,6 +108,15 @@ def atomic_write_json(path: Path, data: Any) -> None:
             os.close(dfd)
     except OSError:
         pass
+
+
+def atomic_write_json(path: Path, data: Any) -> None:
+    """Write JSON to ``path`` atomically (tmp file in the same directory, fsync, os.replace)."""
+    text = json.dumps(data, indent=1, sort_keys=False, allow_nan=False)
+    with atomic_path(path) as tmp, open(tmp, "w") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def write_record(study_dir: Path, record: dict[str, Any]) -> Path:
@@ -256,15 +269,6 @@ def write_table(study_dir: Path, df: pd.DataFrame | None = None) -> Path:
     if df is None:
         df = collect(study_dir)
     path = study_dir / "results.parquet"
-    fd, tmp = tempfile.mkstemp(prefix=".results.", suffix=".parquet.tmp", dir=study_dir)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         _arrow_safe(df).to_parquet(tmp, index=False)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return path
