@@ -1,0 +1,60 @@
+"""The Newton solver's decisions on tiny energies with known answers."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from undulate.mechanics.assemble import Assembly, ElementGroup
+from undulate.solve.linear import make_solver
+from undulate.solve.newton import NewtonOptions, _refined_solve, minimize
+
+
+def _pair(eps: float) -> Assembly:
+    """Two coupled unknowns: E = (x-y)^4 - eps (x-y)^2 + (x+y)^2 (+ z terms), x = node coords."""
+
+    def fn(xl, e):
+        d = xl[0, 0] - xl[1, 0]
+        return d**4 - e * d**2 + (xl[0, 0] + xl[1, 0]) ** 2 + jnp.sum(xl[:, 1:] ** 2)
+
+    g = ElementGroup("pair", fn, np.array([[0, 1]]), (np.array([eps]),))
+    return Assembly(2, [g], np.zeros((2, 3), bool))
+
+
+def test_saddle_is_left_for_the_minimum():
+    eps = 0.02
+    asm = _pair(eps)
+    x0 = np.zeros((2, 3))
+    res = minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10))
+    assert res.converged and res.n_negative == 0
+    x = asm.full(res.u, x0)
+    assert abs(x[0, 0] - x[1, 0]) == pytest.approx(np.sqrt(eps / 2), rel=1e-6)
+
+
+def test_neutral_mode_within_roundoff_counts_as_stable_but_not_beyond():
+    asm = _pair(1e-10)  # relative lowest eigenvalue about -1e-10: a neutral mode
+    x0 = np.zeros((2, 3))
+    res = minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10))
+    assert res.converged and "marginally stable" in res.message
+    strict = minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10, marginal=0.0))
+    assert strict.converged and "marginally" not in strict.message
+    x = asm.full(strict.u, x0)
+    # it left the neutral point for the (very shallow) minimum at |x - y| = sqrt(eps / 2)
+    assert abs(x[0, 0] - x[1, 0]) == pytest.approx(np.sqrt(0.5e-10), rel=0.1)
+
+
+def test_iterative_refinement_recovers_digits_on_an_ill_conditioned_system():
+    rng = np.random.default_rng(0)
+    n = 40
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    A = (Q * np.logspace(0, 11, n)) @ Q.T
+    A = 0.5 * (A + A.T)
+    b = rng.standard_normal(n)
+    solver = make_solver()
+    solver.factor(sp.csc_matrix(np.triu(A)))
+    d0 = solver.solve(b)
+    d = _refined_solve(solver, sp.csr_matrix(A), b)
+    r0 = np.linalg.norm(A @ d0 - b)
+    r = np.linalg.norm(A @ d - b)
+    assert r <= r0
+    assert r < 1e-6 * np.linalg.norm(b)
