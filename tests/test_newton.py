@@ -58,3 +58,15 @@ def test_iterative_refinement_recovers_digits_on_an_ill_conditioned_system():
     r = np.linalg.norm(A @ d - b)
     assert r <= r0
     assert r < 1e-6 * np.linalg.norm(b)
+
+
+def test_auto_solver_picks_one_and_keeps_the_inertia():
+    from undulate.solve.linear import AutoSolver
+
+    A = sp.diags([2.0, -1.0, 3.0, -4.0]) + sp.diags([0.1, 0.1, 0.1], 1)
+    s = AutoSolver()
+    assert s.factor(sp.csc_matrix(sp.triu(A))) == 2
+    assert s.name in ("auto:qdldl", "auto:splu")
+    b = np.arange(1.0, 5.0)
+    full = (A + sp.triu(A, 1).T).toarray()
+    np.testing.assert_allclose(full @ s.solve(b), b, atol=1e-12)

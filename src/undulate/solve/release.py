@@ -260,5 +260,6 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         de = min(2.0 * de, de_nom)
     totals["release_steps"] = len(history) - 1
     totals["converged"] = True
+    totals["linear_solver"] = solver.name
     totals["final_residual"] = history[-1]["residual"]
     return x, history, totals

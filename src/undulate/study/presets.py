@@ -10,8 +10,8 @@ parallel-phase-diagram     N = 5, h = 0.1..2.0 step 0.1 (20),     h = 0.2..2.0 s
                            s = 0..50 step 2.5 (21): 420 runs      s in [0, 5, 10, 25, 50]: 35
 =========================  =====================================  ==============================
 
-Quick variants also use a coarser, cheaper case: rods L = 60 mm, ``fabric.margin_y = 30``,
-``mesh.dx_rod = 2.0``, ``mesh.dx_far = 6.0``, ``mesh.dy_far = 8.0``, ``release.steps = 15``.
+Quick variants also use a coarser, cheaper case: rods L = 60 mm, ``mesh.dx_rod = 2.0``,
+``mesh.dx_far = 6.0``, ``mesh.dy_far = 8.0``, ``release.steps = 15``.
 Quick results are for smoke tests and the pipeline, not for physics (shorter rods shift the
 quantization plateaus).
 """
@@ -30,7 +30,6 @@ __all__ = ["PRESETS", "preset_names", "get_preset", "resolve_study", "QUICK_OVER
 #: Changes applied to the base case of every preset in ``--quick`` mode.
 QUICK_OVERRIDES: dict[str, Any] = {
     "rods": {"L": 60.0},
-    "fabric": {"margin_y": 30.0},
     "mesh": {"dx_rod": 2.0, "dx_far": 6.0, "dy_far": 8.0},
     "release": {"steps": 15},
 }
