@@ -30,6 +30,8 @@ from typing import Any
 
 import pandas as pd
 
+from .spec import get_path
+
 __all__ = [
     "RECORD_SCHEMA",
     "ScanResult",
@@ -198,15 +200,6 @@ def write_study(study_dir: Path, meta: dict[str, Any]) -> None:
     atomic_write_json(Path(study_dir) / "study.json", jsonable(meta))
 
 
-def _effective(case: dict[str, Any], path: str, default: Any) -> Any:
-    cur: Any = case
-    for part in path.split("."):
-        if not isinstance(cur, dict) or part not in cur:
-            return default
-        cur = cur[part]
-    return cur
-
-
 def _row(rec: dict[str, Any]) -> dict[str, Any]:
     case = rec.get("case", {})
     row: dict[str, Any] = {
@@ -217,7 +210,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     for path, value in (rec.get("params") or {}).items():
         row[path] = value
     for short, (path, default) in PARAM_ALIASES.items():
-        row[short] = _effective(case, path, default)
+        row[short] = get_path(case, path, default)
     for key, value in (rec.get("record") or {}).items():
         col = key if key not in row else f"rec_{key}"
         row[col] = json.dumps(value) if isinstance(value, list | dict) else value
