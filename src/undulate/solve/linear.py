@@ -118,16 +118,15 @@ class AutoSolver:
             for cand in (LDLSolver(), LUSolver()):
                 t = time.perf_counter()
                 try:
-                    cand.factor(H_upper)
+                    n = cand.factor(H_upper)
                 except SingularMatrixError:
                     continue
                 dt = time.perf_counter() - t
                 if best is None or dt < best[0]:
-                    best = (dt, cand)
+                    best = (dt, cand, n)
             if best is None:
                 raise SingularMatrixError("zero pivot in both QDLDL and SuperLU")
-            self._choice = best[1]
-            n_neg = self._choice.factor(H_upper)
+            _, self._choice, n_neg = best  # the winner keeps its factorization of H_upper
         else:
             n_neg = self._choice.factor(H_upper)
         self.factor_time += time.perf_counter() - t0
