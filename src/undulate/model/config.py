@@ -153,7 +153,10 @@ class SolverOptions(_Strict):
     rtol: float = Field(
         1e-6, gt=0.0, lt=1.0, description="residual tolerance relative to the force scale"
     )
-    max_iter: int = Field(60, ge=1, le=10000, description="Newton iterations per increment")
+    # 300, not 60: just past a bifurcation and at mode changes the equilibrium lies along a very
+    # soft direction and Newton needs 150-300 damped iterations (measured: h = 0.08, the
+    # buckling step took 184; with 60 the step was cut down to its minimum and the run failed)
+    max_iter: int = Field(300, ge=1, le=10000, description="Newton iterations per increment")
     linear_solver: Literal["auto", "qdldl", "splu"] = Field(
         "auto", description="sparse direct solver"
     )

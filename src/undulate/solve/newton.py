@@ -52,7 +52,7 @@ class ConvergenceError(RuntimeError):
 class NewtonOptions:
     rtol: float = 1e-6
     force_scale: float = 1.0
-    max_iter: int = 60
+    max_iter: int = 300
     negative_curvature: bool = True
     require_stable: bool = True
     linear_solver: str = "auto"

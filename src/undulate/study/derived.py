@@ -6,6 +6,7 @@ SPEC section 3 formulas are evaluated inline (same names, same keyword arguments
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from typing import Any
@@ -69,10 +70,23 @@ def theory() -> dict[str, Callable[..., Any]]:
 
 
 def ok_rows(df: pd.DataFrame) -> pd.DataFrame:
-    """Rows of successful runs."""
+    """Rows of successful runs (with ``r2_*_mean`` filled from the per-rod lists if absent)."""
     if "status" not in df:
         return df.iloc[0:0]
-    return df[df["status"] == "ok"].copy()
+    d = df[df["status"] == "ok"].copy()
+    for key in ("r2_arcs", "r2_sine"):
+        if f"{key}_mean" not in d and f"rods_{key}" in d:
+            d[f"{key}_mean"] = d[f"rods_{key}"].map(_json_mean)
+    return d
+
+
+def _json_mean(text: object) -> float:
+    """Mean of the numbers in a JSON list (tables written before the summary held it)."""
+    try:
+        vals = [float(v) for v in json.loads(str(text)) if v is not None]
+    except (TypeError, ValueError):
+        return float("nan")
+    return float(np.mean(vals)) if vals else float("nan")
 
 
 def n_values(df: pd.DataFrame) -> pd.Series:
