@@ -68,6 +68,10 @@ def test_analyse_run_structure_and_mixed_flat():
     assert res["rods"][3]["quality"] == "flat"
     assert res["family"] == "coherent"  # the flat rod's pair is ignored
     assert res["summary"]["l_mean"] == pytest.approx(20.0, rel=0.02)
+    # the study table's fit-quality columns come from here (figure 1's R^2 panel, report)
+    live = [r for r in res["rods"] if r["n"] > 0]
+    for key in ("r2_arcs", "r2_sine"):
+        assert res["summary"][f"{key}_mean"] == pytest.approx(np.mean([r[key] for r in live]))
     json.dumps(res, allow_nan=False)
     with pytest.raises(ValueError, match="rod 1"):
         analyse_run([rods[0], np.full((10, 3), np.nan)])

@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import _study_fakes as fakes
+import pandas as pd
 import pytest
 
 from undulate.study import collect, get_preset, run_study
@@ -15,6 +16,7 @@ from undulate.study.derived import (
     fit_l_slope,
     hstar,
     hstar_ratios,
+    ok_rows,
     theory,
 )
 from undulate.study.figures import make_figures
@@ -63,6 +65,18 @@ def test_single_rod_figures_and_fits(single_h: Path) -> None:
     arcs = arcs_beat_sines(df)
     assert arcs is not None and arcs["n"] == 95 and 0 < arcs["fraction"] <= 1
     assert fit_eps0_exponent(df) is None  # eps0 not swept
+    assert "## Cost" in text and "sum of run times" in text
+
+
+def test_fit_quality_from_per_rod_lists() -> None:
+    """Tables that only hold the per-rod R^2 lists still give the mean columns."""
+    df = pd.DataFrame({"status": ["ok", "ok", "failed"],
+                       "rods_r2_arcs": ["[0.99, 0.97]", "[0.9]", None],
+                       "rods_r2_sine": ["[0.9, 0.8]", "[0.95]", None]})
+    d = ok_rows(df)
+    assert d["r2_arcs_mean"].tolist() == pytest.approx([0.98, 0.9])
+    arcs = arcs_beat_sines(df)
+    assert arcs == {"fraction": 0.5, "wins": 1, "n": 2}
 
 
 def test_eps0_figure_and_exponent(tmp_path_factory: pytest.TempPathFactory) -> None:

@@ -4,7 +4,8 @@ Sections (each only when the data support it): run counts; slope of l vs h in th
 (runs with n >= 7, i.e. before the quantization plateaus) against eq. (1)'s slope; the eps0
 exponent of l (log-log fit) against -1/2; the fraction of runs where circular arcs fit better
 than a sine (``r2_arcs_mean > r2_sine_mean``); the bundling ratios h*_n(s_min)/h*_n(s_max) for
-the transitions 3->1, 5->3, 7->5 (h*_n = smallest h with n <= n_target) against N^(1/3).
+the transitions 3->1, 5->3, 7->5 (h*_n = smallest h with n <= n_target) against N^(1/3);
+the cost (sum, median and max of the run times, the span of the records, the hosts).
 """
 
 from __future__ import annotations
@@ -112,6 +113,7 @@ def build_report(
         lines.append("")
     if not (fit or exp or arcs or ratios):
         lines += ["No comparison possible with the data present.", ""]
+    lines += _cost_lines(df)
     if n_failed and "error" in df:
         lines += ["## Failures", ""]
         errs = df.loc[df["status"] == "failed", "error"].fillna("?").astype(str)
@@ -120,6 +122,35 @@ def build_report(
             lines.append(f"- {count} x `{msg[:200]}`")
         lines.append("")
     return "\n".join(lines)
+
+
+def _cost_lines(df: pd.DataFrame) -> list[str]:
+    """Compute time and machine(s): sums of the per-run times, the span of the records."""
+    if "elapsed_s" not in df or df.empty:
+        return []
+    el = pd.to_numeric(df["elapsed_s"], errors="coerce").dropna()
+    if el.empty:
+        return []
+    out = ["## Cost", "", "| quantity | value |", "|---|---|",
+           f"| runs timed | {len(el)} |",
+           f"| sum of run times [min] | {_f(el.sum() / 60.0, '.1f')} |",
+           f"| median / max run time [s] | {_f(el.median(), '.1f')} / {_f(el.max(), '.1f')} |"]
+    if "started" in df and "finished" in df:
+        t0 = pd.to_datetime(df["started"], errors="coerce", utc=True).min()
+        t1 = pd.to_datetime(df["finished"], errors="coerce", utc=True).max()
+        if pd.notna(t0) and pd.notna(t1):
+            out.append(f"| first start -> last finish (UTC) | {t0:%Y-%m-%d %H:%M} -> "
+                       f"{t1:%Y-%m-%d %H:%M} |")
+    if "newton_iterations" in df:
+        it = pd.to_numeric(df["newton_iterations"], errors="coerce").dropna()
+        if not it.empty:
+            out.append(f"| median / max Newton iterations (ok runs) | {_f(it.median(), '.0f')}"
+                       f" / {_f(it.max(), '.0f')} |")
+    if "host" in df:
+        hosts = sorted(str(h) for h in df["host"].dropna().unique())
+        if hosts:
+            out.append(f"| host(s) | {', '.join(hosts)} |")
+    return out + [""]
 
 
 def write_report(study_dir: str | Path) -> Path:
