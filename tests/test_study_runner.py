@@ -135,7 +135,7 @@ def test_collect_table(tmp_path: Path) -> None:
     study = get_preset("parallel-phase-diagram", quick=True)
     run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False, artifacts=False)
     df = collect(tmp_path)
-    assert len(df) == 35
+    assert len(df) == 12
     for col in ("run_id", "status", "seed", "rods.h", "rods.s", "h", "s", "N", "eps0", "l_mean",
                 "family", "elapsed_s", "error"):
         assert col in df, col
@@ -143,7 +143,7 @@ def test_collect_table(tmp_path: Path) -> None:
     assert (s0["N"] == 1).all() and (s0["b"] == 5.0).all()
     assert list(df["run_id"]) == [r.id for r in study.runs]  # study order
     back = pd.read_parquet(tmp_path / "results.parquet")
-    assert len(back) == 35 and set(back["status"]) <= {"ok", "failed"}
+    assert len(back) == 12 and set(back["status"]) <= {"ok", "failed"}
 
 
 def test_progress_bar_on_a_terminal(tmp_path: Path) -> None:

@@ -18,8 +18,8 @@ from undulate.study.spec import build_study, frange, set_path
         ("single-rod-h", False, 97),
         ("single-rod-eps0", False, 8),
         ("parallel-phase-diagram", False, 420),
-        ("single-rod-h", True, 20),
-        ("parallel-phase-diagram", True, 35),
+        ("single-rod-h", True, 19),
+        ("parallel-phase-diagram", True, 12),
     ],
 )
 def test_preset_sizes_and_valid_cases(name: str, quick: bool, count: int) -> None:

@@ -1,0 +1,69 @@
+"""The quick presets with the real engine (slow marker; CI runs it): run, tables, figures, report.
+
+These are the same commands a user runs (``undulate study run PRESET --quick``), with the
+simulation and analysis of :func:`undulate.api.run_case`, not the fakes of the other study
+tests. The assertions are about the pipeline and coarse physics that any correct engine shows
+on the quick case (L = 60 mm, 2 mm rod mesh, 15 release steps).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from undulate.study import collect, get_preset, run_study
+from undulate.study.derived import fit_eps0_exponent
+from undulate.study.report import write_report
+
+pytestmark = pytest.mark.slow
+
+
+def _run(preset: str, out: Path) -> pd.DataFrame:
+    study = get_preset(preset, quick=True)
+    summary = run_study(study, out, workers=2, progress=False, artifacts=False)
+    df = collect(out)
+    failed = df[df["status"] != "ok"]
+    assert failed.empty, failed[["run_id", "error"]].to_string()
+    assert summary.ok == len(study.runs) == len(df)
+    return df
+
+
+def test_quick_single_rod_h(tmp_path: Path) -> None:
+    df = _run("single-rod-h", tmp_path).sort_values("h")
+    n = df["n"].to_numpy()
+    assert (n >= 1).all() and (n % 2 == 1).all()  # odd numbers of half-waves
+    # thick rods: one half-wave spanning the rod; the 0.2 mm rod still forms several
+    thick = df[df["h"] >= 1.0]
+    assert (thick["n"] == 1).all()
+    assert np.allclose(thick["l_mean"], 60.0, rtol=0.05)
+    assert int(df.loc[np.isclose(df["h"], 0.2), "n"].iloc[0]) >= 3
+    assert (df["r2_arcs_mean"] > 0.9).all()
+    assert (df["newton_iterations"] > 0).all() and (df["wall_time_s"] > 0).all()
+    text = write_report(tmp_path).read_text()
+    assert "![single_rod_h](figures/single_rod_h.png)" in text and "## Cost" in text
+    assert (tmp_path / "figures" / "single_rod_h.png").stat().st_size > 20_000
+
+
+def test_quick_single_rod_eps0(tmp_path: Path) -> None:
+    df = _run("single-rod-eps0", tmp_path).sort_values("eps0")
+    # higher pre-strain: larger waves (SPEC section 2)
+    assert df["a_mean"].iloc[-1] > df["a_mean"].iloc[0]
+    assert fit_eps0_exponent(df) is not None
+    text = write_report(tmp_path).read_text()
+    assert "exponent" in text and "l_vs_eps0" in text
+
+
+def test_quick_parallel_phase_diagram(tmp_path: Path) -> None:
+    df = _run("parallel-phase-diagram", tmp_path)
+    assert set(df["family"]) <= {"coherent", "independent", "rolls", "bends"}
+    assert (df.loc[df["s"] == 0.0, "N"] == 1).all()  # s = 0: one rod five times as wide
+    assert (df.loc[df["s"] > 0.0, "N"] == 5).all()
+    # the thickest rods end in one half-wave whatever the gap
+    assert (df.loc[df["h"] == df["h"].max(), "n"] == 1).all()
+    text = write_report(tmp_path).read_text()
+    for name in ("phase_diagram", "master_curve"):
+        assert f"figures/{name}.png" in text
+    assert "Bundling" in text
