@@ -75,6 +75,9 @@ def test_fit_quality_from_per_rod_lists() -> None:
                        "rods_r2_sine": ["[0.9, 0.8]", "[0.95]", None]})
     d = ok_rows(df)
     assert d["r2_arcs_mean"].tolist() == pytest.approx([0.98, 0.9])
+    # mixed tables (old records without the column, new ones with it)
+    mixed = df.assign(r2_arcs_mean=[None, 0.5, None])
+    assert ok_rows(mixed)["r2_arcs_mean"].tolist() == pytest.approx([0.98, 0.5])
     arcs = arcs_beat_sines(df)
     assert arcs == {"fraction": 0.5, "wins": 1, "n": 2}
 

@@ -75,8 +75,10 @@ def ok_rows(df: pd.DataFrame) -> pd.DataFrame:
         return df.iloc[0:0]
     d = df[df["status"] == "ok"].copy()
     for key in ("r2_arcs", "r2_sine"):
-        if f"{key}_mean" not in d and f"rods_{key}" in d:
-            d[f"{key}_mean"] = d[f"rods_{key}"].map(_json_mean)
+        if f"rods_{key}" in d:
+            filled = d[f"rods_{key}"].map(_json_mean)
+            d[f"{key}_mean"] = (pd.to_numeric(d[f"{key}_mean"], errors="coerce")
+                                .fillna(filled) if f"{key}_mean" in d else filled)
     return d
 
 

@@ -88,6 +88,11 @@ def fig_single_rod_h(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
                         label={"l": "eq. (1)", "a": "a formula", "R": "l/√(24ε0)"}[key]
                         + f", ε0={eps0:g}")
             ax.set_ylabel(label)
+        # SPEC section 3: the predicted n is the odd integer nearest L / l
+        ratio = L / np.maximum(th["l"](hh[1:], eps0, **mat), 1e-9)
+        n_pred = np.maximum(1, 2 * np.round((ratio - 1.0) / 2.0) + 1)
+        axes[4].step(hh[1:], n_pred, where="mid", color=color, alpha=0.7,
+                     label=f"odd n nearest L/l, ε0={eps0:g}")
         if "r2_arcs_mean" in g:
             axes[5].plot(g["h"], g["r2_arcs_mean"], "o-", ms=3, color=color, label="arcs")
         if "r2_sine_mean" in g:
@@ -101,7 +106,8 @@ def fig_single_rod_h(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
             axes[0].text(0.01, L / n, f"L/{n}", fontsize=7, va="bottom", color="0.4",
                          transform=axes[0].get_yaxis_transform())
     axes[1].set_ylim(bottom=0)
-    axes[4].set_yscale("log")
+    nmax = float(np.nanmax(_num(d, "n"))) if d["n"].notna().any() else 1.0
+    axes[4].set_ylim(0, max(nmax, 3.0) * 1.15)
     axes[5].set_ylabel("fit R²")
     locs = ["upper left"] * 4 + ["upper right", "lower left"]
     for ax, loc in zip(axes, locs, strict=True):
