@@ -8,6 +8,7 @@ on the quick case (L = 60 mm, 2 mm rod mesh, 15 release steps).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,8 @@ def test_quick_single_rod_h(tmp_path: Path) -> None:
     assert np.allclose(thick["l_mean"], 60.0, rtol=0.05)
     assert int(df.loc[np.isclose(df["h"], 0.2), "n"].iloc[0]) >= 3
     assert (df["r2_arcs_mean"] > 0.9).all()
+    qualities = [json.loads(q)[0] for q in df["rods_quality"]]
+    assert "noisy" not in qualities and "flat" not in qualities, qualities
     assert (df["newton_iterations"] > 0).all() and (df["wall_time_s"] > 0).all()
     text = write_report(tmp_path).read_text()
     assert "![single_rod_h](figures/single_rod_h.png)" in text and "## Cost" in text
