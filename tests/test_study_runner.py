@@ -144,6 +144,10 @@ def test_collect_table(tmp_path: Path) -> None:
     assert list(df["run_id"]) == [r.id for r in study.runs]  # study order
     back = pd.read_parquet(tmp_path / "results.parquet")
     assert len(back) == 12 and set(back["status"]) <= {"ok", "failed"}
+    # each record keeps the validated case with every default, and the table reads it
+    rec = json.loads(next((tmp_path / "runs").glob("*.json")).read_text())
+    assert rec["case_resolved"]["fabric"]["margin_y"] == pytest.approx(df["margin_y"].iloc[0])
+    assert rec["case_resolved"]["solver"]["max_iter"] >= 1 and rec["version"]
 
 
 def test_progress_bar_on_a_terminal(tmp_path: Path) -> None:

@@ -27,6 +27,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from .. import __version__
 from .spec import RunSpec, Study, StudyError
 from .storage import (
     RECORD_SCHEMA,
@@ -88,8 +89,8 @@ def execute_run(
 ) -> dict[str, Any]:
     """Run one case in the current process; never raises for a failing run.
 
-    Returns ``{"status", "record", "error", "traceback", "started", "finished", "elapsed_s",
-    "host", "pid"}``. This is what worker processes / dask tasks execute.
+    Returns ``{"status", "record", "error", "traceback", "case_resolved", "started",
+    "finished", "elapsed_s", "host", "pid"}``. This is what worker processes / dask tasks execute.
     """
     started = _now()
     t0 = time.perf_counter()
@@ -99,6 +100,8 @@ def execute_run(
 
         fn = resolve_runner(runner)
         case = case_from_dict(case_dict)
+        # every field, defaults included: a record stays readable when a default changes
+        result["case_resolved"] = case.model_dump(mode="json")
         out_path = Path(out) if (out is not None and artifacts) else None
         if out_path is not None:
             out_path.mkdir(parents=True, exist_ok=True)
@@ -273,6 +276,8 @@ def run_study(
             "seed": r.seed,
             "attempt": attempts[r.id],
             "case": r.case,
+            "case_resolved": res.get("case_resolved"),
+            "version": __version__,
             "record": res.get("record"),
             "error": res.get("error"),
             "traceback": res.get("traceback"),

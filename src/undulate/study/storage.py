@@ -61,6 +61,8 @@ PARAM_ALIASES: dict[str, tuple[str, Any]] = {
     "eps0": ("release.eps0", 0.5),
     "E": ("fabric.E", 0.45),
     "t": ("fabric.t", 0.4),
+    # records written before the resolved case was stored used the 20 mm default
+    "margin_y": ("fabric.margin_y", 20.0),
 }
 
 
@@ -201,7 +203,7 @@ def write_study(study_dir: Path, meta: dict[str, Any]) -> None:
 
 
 def _row(rec: dict[str, Any]) -> dict[str, Any]:
-    case = rec.get("case", {})
+    case = rec.get("case_resolved") or rec.get("case", {})
     row: dict[str, Any] = {
         "run_id": rec["id"],
         "status": rec["status"],
@@ -223,7 +225,7 @@ def collect(study_dir: Path, *, only_study: bool = True) -> pd.DataFrame:
     """Tidy table of a study: one row per valid record.
 
     Columns: ``run_id``, ``status``, ``seed``; the swept parameters by dotted path
-    (e.g. ``rods.h``); short aliases of the effective case (``h b L N s E_B eps0 E t``,
+    (e.g. ``rods.h``); short aliases of the effective case (``h b L N s E_B eps0 E t margin_y``,
     after the s = 0 single-rod rule); every field of the engine's record (a name that collides
     gets a ``rec_`` prefix; lists/dicts as JSON strings); ``error``, ``elapsed_s``, ``started``,
     ``finished``, ``attempt``, ``host``. With ``only_study`` and a ``study.json`` present, only
