@@ -106,3 +106,15 @@ def test_parallel_figures_hstar_and_bundling(parallel: Path) -> None:
         assert f"figures/{name}.png" in text
     assert not (parallel / "figures" / "single_rod_h.png").exists()
     assert "| 3->1 |" in text and "N^(1/3)" in text and "figures/phase_diagram.png" in text
+
+
+def test_linear_regime_stops_at_first_single_arch() -> None:
+    """Thick rods that come back to n = 3 (l ~ L/2) are not part of the linear regime."""
+    h = [0.1, 0.15, 0.2, 0.25, 0.5, 1.0, 1.8, 2.0]
+    n = [7, 7, 5, 5, 1, 1, 3, 3]
+    lv = [6.1, 9.2, 12.3, 15.3, 100.0, 100.0, 51.0, 50.8]
+    df = pd.DataFrame({"status": "ok", "h": h, "n_mode": n, "l_mean": lv, "eps0": 0.5})
+    fit = fit_l_slope(df)
+    assert fit is not None and fit["h_below"] == 0.5 and fit["n_points"] == 4
+    assert fit["n_min"] == 5
+    assert fit["slope"] == pytest.approx(61.0, rel=0.02)

@@ -147,11 +147,13 @@ def hstar(df: pd.DataFrame, n_target: int = 1, by: str = "s") -> pd.Series:
 
 
 def fit_l_slope(df: pd.DataFrame, n_min: int | None = None) -> dict[str, float] | None:
-    """Fit ``l_mean = k h + c`` over the linear regime (runs with ``n >= n_min``).
+    """Fit ``l_mean = k h + c`` over the linear regime (runs with ``n >= n_min`` and ``h`` below
+    the first run that ends with n = 1, ``h_below``).
 
     Without ``n_min`` the first of 7, 5, 3 that leaves at least 3 distinct h is used (7 keeps
     clear of the quantization plateaus for L = 100 mm; coarse/quick studies need less).
-    Returns ``{"slope", "intercept", "slope_origin", "slope_eq1", "n_points", "eps0", "n_min"}``
+    Returns ``{"slope", "intercept", "slope_origin", "slope_eq1", "n_points", "eps0", "n_min",
+    "h_below"}``
     or None when no choice leaves 3 distinct h. ``slope_origin`` fits through the origin as
     eq. (1) does.
     """
@@ -165,9 +167,13 @@ def fit_l_slope(df: pd.DataFrame, n_min: int | None = None) -> dict[str, float] 
     if d.empty or "l_mean" not in d or "h" not in d:
         return None
     d = d.assign(_n=n_values(d), _l=pd.to_numeric(d["l_mean"], errors="coerce"))
-    d = d[(d["_n"] >= n_min) & d["_l"].notna()]
     if "eps0" in d and d["eps0"].nunique() > 1:  # keep the most common eps0
         d = d[d["eps0"] == d["eps0"].mode().iloc[0]]
+    # "below the plateaus": thinner than the first rod that ends in one half-wave (thick rods
+    # can come back to n = 3 with l ~ L/2, which is not the linear regime)
+    ones = d.loc[d["_n"] == 1, "h"]
+    h_one = float(ones.min()) if not ones.empty else float("inf")
+    d = d[(d["_n"] >= n_min) & d["_l"].notna() & (d["h"] < h_one)]
     if d["h"].nunique() < 3:
         return None
     h = d["h"].to_numpy(float)
@@ -177,7 +183,7 @@ def fit_l_slope(df: pd.DataFrame, n_min: int | None = None) -> dict[str, float] 
     eps0 = float(d["eps0"].iloc[0]) if "eps0" in d else 0.5
     k_eq1 = float(np.asarray(theory()["l"](1.0, eps0, **material(d))))
     return {"slope": float(k), "intercept": float(c), "slope_origin": k0, "slope_eq1": k_eq1,
-            "n_points": int(len(d)), "eps0": eps0, "n_min": n_min}
+            "n_points": int(len(d)), "eps0": eps0, "n_min": n_min, "h_below": h_one}
 
 
 def fit_eps0_exponent(df: pd.DataFrame) -> dict[str, float] | None:

@@ -68,7 +68,8 @@ def build_report(
     if fit:
         rel_err = fit["slope"] / fit["slope_eq1"] - 1.0
         lines += [
-            f"**l vs h, linear regime** (runs with n >= {fit['n_min']}, {fit['n_points']} points, "
+            f"**l vs h, linear regime** (runs with n >= {fit['n_min']} and h below the first "
+            f"n = 1 run at {_f(fit['h_below'])} mm, {fit['n_points']} points, "
             f"eps0 = {_f(fit['eps0'])}):",
             "",
             "| quantity | value |",
