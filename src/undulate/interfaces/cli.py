@@ -52,7 +52,8 @@ def _simulate_and_report(case, out: Path) -> None:
         v = rec.get(key)
         t.add_row(key, f"{v:.4g}" if isinstance(v, float) else str(v))
     console.print(t)
-    console.print(f"wrote {out}/final.vtu, metrics.json, centerlines.npz, rod_*_side.png")
+    console.print(f"wrote {out}/final.vtu, metrics.json, centerlines.npz, "
+                  "rod_*_side.png, rod_*_fits.png")
 
 
 @app.command()

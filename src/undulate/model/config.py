@@ -54,10 +54,10 @@ class Fabric(_Strict):
     margin_x: float = Field(
         20.0, ge=2.0, le=1e4, description="fabric beyond the rod ends along x, printed state [mm]"
     )
-    # With free long edges a narrow strip lifts as a whole with the rod (a ribbon arch: n = 1
-    # from h = 0.28 at 20 mm); wide sheets keep waves (h = 0.4: l = 22.71 / 22.05 / 22.13 mm
-    # for margins 40 / 60 / 120 mm). 20 mm stays the default because the solver does not yet
-    # converge robustly on the wider sheet (see docs/model.md, "Fabric width").
+    # With free long edges a narrow strip lifts as a whole with the rod (a ribbon arch, n = 1):
+    # from h = 0.28 at 20 mm, from h = 0.5 at 40 mm; at 100 mm h = 0.6 still makes 3 half-waves.
+    # 20 mm stays the default because wide sheets are several times slower to solve (see
+    # docs/model.md, "Fabric width").
     margin_y: float = Field(
         20.0, ge=2.0, le=1e4, description="fabric beyond the outer rods along y, printed state [mm]"
     )
