@@ -104,15 +104,12 @@ class AutoSolver:
 
     def __init__(self) -> None:
         self._choice: LDLSolver | LUSolver | None = None
-        self.factor_time = 0.0
-        self.n_factor = 0
 
     @property
     def name(self) -> str:
         return f"auto:{self._choice.name}" if self._choice is not None else "auto"
 
     def factor(self, H_upper: sp.csc_matrix) -> int:
-        t0 = time.perf_counter()
         if self._choice is None:
             best = None
             for cand in (LDLSolver(), LUSolver()):
@@ -127,11 +124,8 @@ class AutoSolver:
             if best is None:
                 raise SingularMatrixError("zero pivot in both QDLDL and SuperLU")
             _, self._choice, n_neg = best  # the winner keeps its factorization of H_upper
-        else:
-            n_neg = self._choice.factor(H_upper)
-        self.factor_time += time.perf_counter() - t0
-        self.n_factor += 1
-        return n_neg
+            return n_neg
+        return self._choice.factor(H_upper)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         assert self._choice is not None
