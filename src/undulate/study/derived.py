@@ -1,14 +1,11 @@
-"""Quantities derived from a study table (shared by figures and report), and the theory curves.
-
-The analytical formulas come from :mod:`undulate.theory` when it is importable; otherwise the
-SPEC section 3 formulas are evaluated inline (same names, same keyword arguments).
+"""Quantities derived from a study table (shared by figures and report), and the theory curves
+(the functions of :mod:`undulate.theory`, see :func:`theory`).
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -29,44 +26,13 @@ __all__ = [
 ]
 
 
-def _l_inline(h: Any, eps0: Any, *, b: float = 1.0, E_B: float = 3000.0, E: float = 0.45,
-              t: float = 0.4) -> Any:
-    I_B = np.asarray(h, dtype=float) ** 3 * b / 12.0
-    return np.cbrt(24.0 * math.sqrt(6.0) * E_B * I_B / (E * t)) * np.asarray(eps0, float) ** -0.5
+def theory() -> dict[str, Any]:
+    """``{"l", "a", "s_hat", "R", "n", "source"}``: the SPEC section 3 functions of
+    :mod:`undulate.theory` (eq. (1), amplitude, s_hat, R = l/sqrt(24 eps0), odd n nearest L/l)."""
+    from undulate import theory as th
 
-
-def _a_inline(h: Any, eps0: Any, *, b: float = 1.0, E_B: float = 3000.0, E: float = 0.45,
-              t: float = 0.4) -> Any:
-    return (1.0 / (2.0 * np.asarray(eps0, float))) * np.cbrt(E_B * b / (3.0 * E * t)) * (
-        np.asarray(h, dtype=float)
-    )
-
-
-def _s_hat_inline(h: Any, eps0: Any, **kw: float) -> Any:
-    return 2.0 * _a_inline(h, eps0, **kw) * (1.0 + np.asarray(eps0, float))
-
-
-def theory() -> dict[str, Callable[..., Any]]:
-    """``{"l", "a", "s_hat", "R", "source"}``: eq. (1), amplitude, s_hat, R = l/sqrt(24 eps0)."""
-    funcs: dict[str, Any] = {"l": _l_inline, "a": _a_inline, "s_hat": _s_hat_inline,
-                             "source": "inline SPEC formulas"}
-    try:
-        from undulate import theory as th
-
-        cand = {"l": th.l, "a": th.a, "s_hat": th.s_hat}
-        for f in cand.values():  # check the expected call signature once
-            float(np.asarray(f(0.3, 0.5, b=1.0, E_B=3000.0, E=0.45, t=0.4)))
-        funcs.update(cand)
-        funcs["source"] = "undulate.theory"
-    except Exception:  # theory missing or with another signature: use the SPEC formulas
-        pass
-    l_fn = funcs["l"]
-
-    def R(h: Any, eps0: Any, **kw: float) -> Any:
-        return np.asarray(l_fn(h, eps0, **kw), float) / np.sqrt(24.0 * np.asarray(eps0, float))
-
-    funcs["R"] = R
-    return funcs
+    return {"l": th.l, "a": th.a, "s_hat": th.s_hat, "R": th.R, "n": th.n,
+            "source": "undulate.theory"}
 
 
 def ok_rows(df: pd.DataFrame) -> pd.DataFrame:

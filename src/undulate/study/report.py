@@ -1,7 +1,8 @@
 """``DIR/report.md``: figures plus the numbers that compare a study with the analytical model.
 
 Sections (each only when the data support it): run counts; slope of l vs h in the linear regime
-(runs with n >= 7, i.e. before the quantization plateaus) against eq. (1)'s slope; the eps0
+(runs with n >= 7, 5 or 3, thinner than the first rod that ends in one half-wave) against
+eq. (1)'s slope; the eps0
 exponent of l (log-log fit) against -1/2; the fraction of runs where circular arcs fit better
 than a sine (``r2_arcs_mean > r2_sine_mean``); the bundling ratios h*_n(s_min)/h*_n(s_max) for
 the transitions 3->1, 5->3, 7->5 (h*_n = smallest h with n <= n_target) against N^(1/3);
