@@ -32,7 +32,7 @@ if os.environ.get("UNDULATE_JAX_CACHE", "1") != "0":
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
 
-__all__ = ["ElementGroup", "Assembly"]
+__all__ = ["ElementGroup", "Assembly", "StrainForm", "strain_form", "strain_form_kernels"]
 
 
 @dataclass
@@ -79,10 +79,23 @@ class ElementGroup:
             for s0 in range(0, n_pad, self.chunk)
         ]
 
-    def run(self, kernel: str, x: jnp.ndarray) -> list:
-        """Evaluate a kernel chunk by chunk over the padded elements; drop the padding."""
+    def run(self, kernel: str, x: jnp.ndarray, *extra, per_element: np.ndarray | None = None
+            ) -> list:
+        """Evaluate a kernel chunk by chunk over the padded elements (the padding is kept).
+
+        ``extra`` are global arguments appended to every call; ``per_element`` (n_el, ...) is
+        chunked like the parameters and appended after them.
+        """
         kern = kernels_for(self.fn)[kernel]
-        return [kern(x, nodes, *params) for nodes, params in self._chunks]
+        if per_element is None:
+            return [kern(x, nodes, *params, *extra) for nodes, params in self._chunks]
+        pe = np.asarray(per_element, dtype=np.float64)
+        n_pad = len(self._chunks) * self.chunk
+        pad = np.zeros((n_pad - self.n_el,) + pe.shape[1:])
+        pe = jnp.asarray(np.concatenate([pe, pad]))
+        c = self.chunk
+        return [kern(x, nodes, *params, pe[i * c : (i + 1) * c], *extra)
+                for i, (nodes, params) in enumerate(self._chunks)]
 
     @property
     def n_el(self) -> int:
@@ -166,6 +179,109 @@ def composite_kernels(
     }
 
 
+@dataclass(frozen=True)
+class StrainForm:
+    """An element energy written as ``0.5 * sum_i k_i e_i^2`` (a quadratic in strains).
+
+    ``e = resid(q, *params)`` (m,) are the element's strains minus their rest values, of the
+    intermediates ``q = [block(x_b)]_b`` of ``n_blocks`` equal node blocks (as in
+    :func:`composite_kernels`); ``k = moduli(*params)`` (m,) their stiffnesses. Written this way,
+    the Hessian splits into ``J^T k J`` and ``sum_i s_i d2 e_i`` with the stress ``s = k e``, and
+    the Newton solver may evaluate the second term with a stress it carries itself (a mixed,
+    stress-as-unknown Newton: see :mod:`undulate.solve.newton`).
+    """
+
+    block: Callable[[jnp.ndarray], jnp.ndarray]
+    n_blocks: int
+    resid: Callable[..., jnp.ndarray]
+    moduli: Callable[..., jnp.ndarray]
+
+
+def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
+    """Batched kernels of a :class:`StrainForm` energy.
+
+    ``grad_hess`` is the exact (consistent) pair; ``grad_hess_mixed(xl, *params, s)`` uses the
+    given element stresses ``s`` (m,) in the geometric term; ``stress`` returns ``k e`` and
+    ``stress_lin(xl, *params, dxl)`` the stress of the strains linearized at ``xl`` along
+    ``dxl``, ``k (e + J dx)``.
+    """
+    nb = sf.n_blocks
+
+    def bf(y):
+        return sf.block(y.reshape(-1, 3))
+
+    def split(xl):
+        return xl.reshape(nb, -1)
+
+    def energy(xl, *p):
+        q = jax.vmap(bf)(split(xl)).ravel()
+        e = sf.resid(q, *p)
+        return 0.5 * jnp.sum(sf.moduli(*p) * e * e)
+
+    def parts(xl, *p):
+        xb = split(xl)
+        q = jax.vmap(bf)(xb)  # (nb, mq)
+        Jq = jax.vmap(jax.jacfwd(bf))(xb)  # (nb, mq, 3kb)
+        e = sf.resid(q.ravel(), *p)
+        Je = jax.jacfwd(sf.resid)(q.ravel(), *p)  # (m, nb*mq)
+        return xb, q, Jq, e, Je
+
+    def grad_one(xl, *p):
+        _, q, Jq, e, Je = parts(xl, *p)
+        dq = ((sf.moduli(*p) * e) @ Je).reshape(q.shape)
+        return jnp.einsum("bm,bmi->bi", dq, Jq).reshape(xl.shape)
+
+    def grad_hess_with(xl, p, s):
+        xb, q, Jq, e, Je = parts(xl, *p)
+        k = sf.moduli(*p)
+        n_q = q.shape[1]
+        g = jnp.einsum("bm,bmi->bi", ((k * e) @ Je).reshape(nb, n_q), Jq).reshape(xl.shape)
+        s = k * e if s is None else s
+        Hb = jax.vmap(jax.hessian(bf))(xb)  # (nb, mq, 3kb, 3kb)
+        Hs = jax.hessian(lambda qq: jnp.dot(s, sf.resid(qq, *p)))(q.ravel())
+        Hq = (Je.T * k) @ Je + Hs
+        Hq = Hq.reshape(nb, n_q, nb, n_q)
+        dq = (s @ Je).reshape(nb, n_q)
+        H = jnp.einsum("bmi,bmcn,cnj->bicj", Jq, Hq, Jq)
+        H = H + jnp.einsum("bij,bc->bicj", jnp.einsum("bm,bmij->bij", dq, Hb), jnp.eye(nb))
+        n = xl.size
+        return g, H.reshape(n, n)
+
+    def grad_hess_one(xl, *p):
+        return grad_hess_with(xl, p, None)
+
+    def grad_hess_mixed_one(xl, *args):
+        return grad_hess_with(xl, args[:-1], args[-1])
+
+    def stress_one(xl, *p):
+        q = jax.vmap(bf)(split(xl)).ravel()
+        return sf.moduli(*p) * sf.resid(q, *p)
+
+    def stress_lin_one(xl, *args):
+        p, dxl = args[:-1], args[-1]
+
+        def e_of(y):
+            return sf.resid(jax.vmap(bf)(split(y)).ravel(), *p)
+
+        e, de = jax.jvp(e_of, (xl,), (dxl,))
+        return sf.moduli(*p) * (e + de)
+
+    return {
+        "per_element": jax.vmap(energy),
+        "grad": jax.vmap(grad_one),
+        "grad_hess": jax.vmap(grad_hess_one),
+        "grad_hess_mixed": jax.vmap(grad_hess_mixed_one),
+        "stress": jax.vmap(stress_one),
+        "stress_lin": jax.vmap(stress_lin_one),
+    }
+
+
+def strain_form(fn: Callable) -> StrainForm | None:
+    """The :class:`StrainForm` an energy function declares (attribute ``strain_form``), or None."""
+    sf = getattr(fn, "strain_form", None)
+    return sf if isinstance(sf, StrainForm) else None
+
+
 _KERNEL_CACHE: dict[Callable, dict[str, Callable]] = {}
 
 
@@ -177,20 +293,30 @@ def kernels_for(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
     :func:`composite_kernels`); otherwise they are made by plain autodiff.
     """
     if fn not in _KERNEL_CACHE:
+        sf = strain_form(fn)
         custom = getattr(fn, "kernels", None)
-        batched = custom() if callable(custom) else _group_kernels(fn)
-        _KERNEL_CACHE[fn] = {name: _with_gather(k) for name, k in batched.items()}
+        if sf is not None:
+            batched = strain_form_kernels(sf)
+        else:
+            batched = custom() if callable(custom) else _group_kernels(fn)
+        _KERNEL_CACHE[fn] = {
+            name: _with_gather(k, gather_last=(name == "stress_lin"))
+            for name, k in batched.items()
+        }
     return _KERNEL_CACHE[fn]
 
 
-def _with_gather(kernel: Callable) -> Callable:
+def _with_gather(kernel: Callable, gather_last: bool = False) -> Callable:
     """Jit ``kernel(x[nodes], *params)`` as one call ``(x, nodes, *params)``.
 
     Gathering the element's nodes inside the compiled function avoids one eager JAX gather
-    per chunk (about 1 ms each on CPU, measured), which dominated cheap kernels.
+    per chunk (about 1 ms each on CPU, measured), which dominated cheap kernels. With
+    ``gather_last`` the last argument is a global (n_nodes, 3) array gathered the same way.
     """
 
     def gathered(x, nodes, *params):
+        if gather_last:
+            return kernel(x[nodes], *params[:-1], params[-1][nodes])
         return kernel(x[nodes], *params)
 
     return jax.jit(gathered)
@@ -297,13 +423,22 @@ class Assembly:
     def gradient(self, x: np.ndarray) -> np.ndarray:
         return self.gradient_full(x).ravel()[self.free_dofs]
 
-    def gradient_hessian(self, x: np.ndarray) -> tuple[np.ndarray, sp.csc_matrix]:
-        """Free gradient and the upper triangle (CSC) of the free Hessian."""
+    def gradient_hessian(self, x: np.ndarray, stress: dict[int, np.ndarray] | None = None
+                         ) -> tuple[np.ndarray, sp.csc_matrix]:
+        """Free gradient and the upper triangle (CSC) of the free Hessian.
+
+        ``stress`` maps the index of a strain-form group (:attr:`mixed_groups`) to element
+        stresses (n_el, m) to use in that group's geometric Hessian term instead of the
+        consistent ``k e(x)`` (mixed Newton). The gradient is always the exact one.
+        """
         xj = jnp.asarray(x)
         gfull = np.zeros((self.n_nodes, 3))
         vals = []
-        for g, keep in zip(self.groups, self._keep, strict=True):
-            outs = g.run("grad_hess", xj)
+        for i, (g, keep) in enumerate(zip(self.groups, self._keep, strict=True)):
+            if stress is not None and i in stress:
+                outs = g.run("grad_hess_mixed", xj, per_element=stress[i])
+            else:
+                outs = g.run("grad_hess", xj)
             ge = np.concatenate([np.asarray(o[0]) for o in outs])[: g.n_el]
             He = np.concatenate([np.asarray(o[1]) for o in outs])[: g.n_el]
             self._scatter_nodes(g, ge, gfull)
@@ -312,6 +447,24 @@ class Assembly:
         data = np.bincount(self._scatter, weights=v, minlength=self.nnz)
         H = sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n_free, self.n_free))
         return gfull.ravel()[self.free_dofs], H
+
+    @property
+    def mixed_groups(self) -> list[int]:
+        """Indices of the groups written in strain form (their stresses can be carried)."""
+        return [i for i, g in enumerate(self.groups) if strain_form(g.fn) is not None]
+
+    def stress(self, x: np.ndarray) -> dict[int, np.ndarray]:
+        """Consistent element stresses ``k e(x)`` of the strain-form groups."""
+        xj = jnp.asarray(x)
+        return {i: np.concatenate([np.asarray(o) for o in self.groups[i].run("stress", xj)])
+                [: self.groups[i].n_el] for i in self.mixed_groups}
+
+    def stress_linearized(self, x: np.ndarray, dx: np.ndarray) -> dict[int, np.ndarray]:
+        """Stresses of the strains linearized at ``x`` and moved by ``dx``: ``k (e + J dx)``."""
+        xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
+        return {i: np.concatenate([np.asarray(o) for o in
+                                   self.groups[i].run("stress_lin", xj, dj)])
+                [: self.groups[i].n_el] for i in self.mixed_groups}
 
     @staticmethod
     def symmetric(H_upper: sp.csc_matrix) -> sp.csr_matrix:

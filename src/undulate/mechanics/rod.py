@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .assemble import composite_kernels
+from .assemble import StrainForm
 
 
 def _unit(v: jnp.ndarray) -> jnp.ndarray:
@@ -141,9 +141,27 @@ def rod_bend_twist(x15: jnp.ndarray, d: jnp.ndarray, rest: jnp.ndarray, lv: jnp.
     return _bend_twist_q(q, d, rest, lv, EI_out, EI_in, GJ)
 
 
-# Kernels by the chain rule through the per-node frame (see assemble.composite_kernels).
-rod_stretch.kernels = lambda: composite_kernels(frame_point, 2, _stretch_q)  # type: ignore[attr-defined]
-rod_bend_twist.kernels = lambda: composite_kernels(frame_point, 3, _bend_twist_q)  # type: ignore[attr-defined]
+# Strain forms (energy = 0.5 sum k e^2 of strains through the per-node frame): the assembly
+# builds the kernels by the chain rule (cheap to compile), and the Newton solver may carry the
+# stresses k e of these stiff strains itself (mixed Newton, see undulate.solve.newton).
+def _stretch_resid(q, d, L0, EA):
+    return jnp.reshape(_edge_length_q(q, d) / L0 - 1.0, (1,))
+
+
+def _stretch_moduli(d, L0, EA):
+    return jnp.reshape(EA * L0, (1,))
+
+
+def _bend_twist_resid(q, d, rest, lv, EI_out, EI_in, GJ):
+    return _vertex_strains_q(q, d) - rest
+
+
+def _bend_twist_moduli(d, rest, lv, EI_out, EI_in, GJ):
+    return jnp.stack([EI_out, EI_in, 0.5 * GJ, 0.5 * GJ]) / lv
+
+
+rod_stretch.strain_form = StrainForm(frame_point, 2, _stretch_resid, _stretch_moduli)  # type: ignore[attr-defined]
+rod_bend_twist.strain_form = StrainForm(frame_point, 3, _bend_twist_resid, _bend_twist_moduli)  # type: ignore[attr-defined]
 
 
 def rod_footprint(x5: jnp.ndarray, rest: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
@@ -163,3 +181,16 @@ def torsion_constant(b: float, h: float) -> float:
     a_, c_ = max(b, h), min(b, h)
     r = c_ / a_
     return a_ * c_**3 * (1.0 / 3.0 - 0.21 * r * (1.0 - r**4 / 12.0))
+
+
+def _footprint_resid(q, rest, k):
+    s = node_strains(q.reshape(5, 3))
+    return jnp.concatenate([jnp.stack([s[0] / rest[0] - 1.0, s[1] - rest[1]]), s[2:] - rest[2:]])
+
+
+def _footprint_moduli(rest, k):
+    return jnp.stack([k[0], k[1], k[2], k[2], k[2]])
+
+
+rod_footprint.strain_form = StrainForm(  # type: ignore[attr-defined]
+    lambda y: y.ravel(), 1, _footprint_resid, _footprint_moduli)

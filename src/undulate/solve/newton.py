@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +60,12 @@ class NewtonOptions:
     #: an equilibrium counts as stable when the lowest eigenvalue of (H, |diag H|) is above
     #: -marginal (a relative curvature; -1e-7 means 1e-7 of each unknown's own stiffness)
     marginal: float = 1e-7
+    #: mixed Newton: carry the stresses of the strain-form (stiff rod) groups as unknowns of
+    #: the iteration instead of recomputing them from the displacements
+    mixed: bool = True
+    #: Newton steps (positive definite Hessian) are accepted against the highest energy of
+    #: the last ``nonmonotone`` iterates (0: monotone Armijo)
+    nonmonotone: int = 5
 
 
 @dataclass
@@ -72,27 +79,46 @@ class NewtonResult:
     negative_steps: int = 0
     times: dict = field(default_factory=dict)
     message: str = ""
+    #: per iteration: (max|g|, negative pivots, kind of step, step length, energy)
+    trace: list = field(default_factory=list)
 
 
 def _lowest_mode(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int, rng: np.random.Generator,
-                 x0: np.ndarray | None) -> tuple[float, np.ndarray]:
-    """Smallest eigenpair of H v = mu S v (S diagonal), preconditioned by K^-1."""
-    X = rng.standard_normal((n, 1)) if x0 is None else x0.reshape(n, 1).copy()
+                 x0: np.ndarray | None, tau: float = 1e-4) -> tuple[float, np.ndarray]:
+    """Smallest eigenpair of H v = mu S v (S diagonal), preconditioned by K^-1 = (H + tau S)^-1.
+
+    The start block is a random vector plus the previous mode ``x0`` when there is one: a warm
+    start alone can lock onto a positive mode while a weaker negative one exists (measured on
+    a thin rod: +4.5e-6 returned while mu = -1.1e-5 existed). The residual tolerance follows
+    the shift tau (about the size of the most negative mu), since the eigenvalues that matter
+    here can be 1e-5 of the stiffness.
+    """
+    X = rng.standard_normal((n, 1))
+    if x0 is not None:
+        X = np.c_[x0.reshape(n, 1), X]
     Sm = sp.diags(S)
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)), dtype=float)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "not reaching the requested tolerance": fine here
-            w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=1e-4, maxiter=40)
-        return float(w[0]), np.ravel(V[:, 0])
+            w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=min(1e-4, 1e-2 * tau),
+                          maxiter=60)
+        i = int(np.argmin(w))
+        return float(w[i]), np.ravel(V[:, i])
     except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
-        return float("nan"), np.ravel(X)
+        return float("nan"), np.ravel(X[:, 0])
 
 
 def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
              opts: NewtonOptions | None = None, *, solver=None,
-             rng: np.random.Generator | None = None) -> NewtonResult:
-    """Minimise the assembly's energy over the free unknowns starting from ``u0``."""
+             rng: np.random.Generator | None = None,
+             x_ref: np.ndarray | None = None) -> NewtonResult:
+    """Minimise the assembly's energy over the free unknowns starting from ``u0``.
+
+    ``x_ref``: an equilibrium the start was predicted from (the previous load step). With
+    ``opts.mixed`` the carried stresses start from the strains linearized at ``x_ref``
+    rather than from those of the predicted start (which a predictor may stretch wrongly).
+    """
     opts = opts or NewtonOptions()
     solver = solver or make_solver(opts.linear_solver)
     rng = rng or np.random.default_rng(0)
@@ -102,65 +128,62 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
     tol = opts.rtol * opts.force_scale
     tau = 1e-6
     neg_steps = 0
-    t_asm = t_fac = t_eig = t_ls = 0.0
+    times = dict(assembly=0.0, factor=0.0, eig=0.0, line_search=0.0)
+    trace: list[tuple] = []
     n_neg = -1
     res = float("inf")
     v_prev = None
+    mixed = opts.mixed and bool(asm.mixed_groups)
+    recent: deque[float] = deque([E], maxlen=max(opts.nonmonotone, 1))
+    stress = None
+    if mixed and x_ref is not None:
+        stress = asm.stress_linearized(x_ref, x - x_ref)
+
+    def result(converged: bool, it: int, message: str = "") -> NewtonResult:
+        return NewtonResult(u, converged, it, res, E, n_neg, neg_steps, dict(times), message,
+                            trace)
+
     for it in range(opts.max_iter + 1):
         t0 = time.perf_counter()
-        g, H = asm.gradient_hessian(x)
-        t_asm += time.perf_counter() - t0
+        g, H = asm.gradient_hessian(x, stress)
         res = float(np.max(np.abs(g))) if g.size else 0.0
+        if stress is not None and res <= tol:
+            # converged in force: judge stability on the exact Hessian
+            stress = None
+            g, H = asm.gradient_hessian(x)
+        times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
             n_neg = solver.factor(H)
         except SingularMatrixError:
             n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
-        t_fac += time.perf_counter() - t0
+        times["factor"] += time.perf_counter() - t0
         if not np.isfinite(res):
             break
         stable = n_neg == 0 or not opts.require_stable
         if res <= tol and stable:
-            return NewtonResult(u, True, it, res, E, n_neg, neg_steps,
-                                dict(assembly=t_asm, factor=t_fac, eig=t_eig, line_search=t_ls))
+            return result(True, it)
         if it == opts.max_iter:
             break
         t0 = time.perf_counter()
+        v = None
         if n_neg == 0:
             d = _refined_solve(solver, asm.symmetric(H), -g)
-            v = None
         else:
-            # shifted factorization K = H + tau S, tau grown until K is positive definite
-            S = np.abs(H.diagonal())
-            S = np.maximum(S, 1e-12 * max(S.max(), 1e-300))
-            while True:
-                K = H.copy()  # same pattern as H: the symbolic factorization is reused
-                K.data[asm.diag_pos] += tau * S
-                try:
-                    if solver.factor(K) == 0:
-                        break
-                except SingularMatrixError:
-                    pass
-                tau *= 10.0
-                if tau > 1e12:
-                    raise ConvergenceError("could not make the Hessian positive definite",
-                                           residual=res)
-            t_fac += time.perf_counter() - t0
+            tau = _shift_until_definite(asm, solver, H, tau, res)
+            S = _jacobi_scale(H)
+            times["factor"] += time.perf_counter() - t0
             d = -solver.solve(g)
-            v = None
             if opts.negative_curvature:
                 t1 = time.perf_counter()
-                Hs = asm.symmetric(H)
-                mu, v = _lowest_mode(Hs, S, solver.solve, u.size, rng, v_prev)
-                t_eig += time.perf_counter() - t1
+                mu, v = _lowest_mode(asm.symmetric(H), S, solver.solve, u.size, rng, v_prev,
+                                     tau)
+                times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
                     # equilibrium whose only "negative" curvature is at the level of the
                     # factorization's roundoff relative to the stiffness: marginally stable
-                    return NewtonResult(u, True, it, res, E, n_neg, neg_steps,
-                                        dict(assembly=t_asm, factor=t_fac, eig=t_eig,
-                                             line_search=t_ls),
-                                        f"marginally stable: lowest relative eigenvalue "
-                                        f"{mu:.2e}")
+                    return result(True, it, f"marginally stable: lowest relative eigenvalue "
+                                            f"{mu:.2e}")
                 if not (np.isfinite(mu) and mu < 0):
                     v = None
                 else:
@@ -174,25 +197,55 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                     v = v * max(dn, 1e-3 * np.sqrt(np.sum(S))) / vn
             tau = max(tau / 10.0, 1e-8)
         t0 = time.perf_counter()
-        x_new, E_new, ok, curved = _line_search(asm, x_fixed, u, d, v, g, E, H)
-        t_ls += time.perf_counter() - t0
-        if not ok:
-            if v is None and n_neg == 0:
+        E_ref = max(recent) if (opts.nonmonotone and v is None) else E
+        x_new, E_new, alpha, curved = _line_search(asm, x_fixed, u, d, v, g, E, H, E_ref)
+        times["line_search"] += time.perf_counter() - t0
+        trace.append((res, n_neg, "curved" if curved else ("newton" if n_neg == 0 else
+                                                            "shifted"), alpha, E))
+        if x_new is None:
+            if v is None and n_neg == 0 and res <= 10 * tol:
                 # a Newton step that cannot decrease the energy at tiny residual is roundoff
-                if res <= 10 * tol:
-                    return NewtonResult(u, True, it, res, E, n_neg, neg_steps,
-                                        dict(assembly=t_asm, factor=t_fac, eig=t_eig,
-                                             line_search=t_ls),
-                                        "stopped at roundoff")
+                return result(True, it, "stopped at roundoff")
             break
         neg_steps += int(curved)
+        if mixed:
+            # the stresses follow the linearized strains (mixed Newton): a step that rotates
+            # a stiff rod edge does not load it with the step's second-order stretch
+            t1 = time.perf_counter()
+            stress = asm.stress_linearized(x, x_new - x)
+            times["assembly"] += time.perf_counter() - t1
         u = asm.free(x_new)
         x = x_new
         E = E_new
-    return NewtonResult(u, False, it, res, E, n_neg, neg_steps,
-                        dict(assembly=t_asm, factor=t_fac, eig=t_eig, line_search=t_ls),
-                        f"no stable equilibrium after {it} iterations: max|g| = {res:.3e} "
-                        f"(tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+        recent.append(E)
+    return result(False, it, f"no stable equilibrium after {it} iterations: max|g| = "
+                             f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+
+
+def _jacobi_scale(H: sp.csc_matrix) -> np.ndarray:
+    """S = |diag H| (floored): each unknown's own stiffness, the metric of shifts and modes."""
+    S = np.abs(H.diagonal())
+    return np.maximum(S, 1e-12 * max(S.max(), 1e-300))
+
+
+def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, tau: float,
+                          res: float) -> float:
+    """Factor K = H + tau S with tau grown by 10 until K is positive definite; return tau.
+
+    K keeps H's pattern, so the symbolic factorization is reused.
+    """
+    S = _jacobi_scale(H)
+    while True:
+        K = H.copy()
+        K.data[asm.diag_pos] += tau * S
+        try:
+            if solver.factor(K) == 0:
+                return tau
+        except SingularMatrixError:
+            pass
+        tau *= 10.0
+        if tau > 1e12:
+            raise ConvergenceError("could not make the Hessian positive definite", residual=res)
 
 
 def _refined_solve(solver, Hs: sp.csr_matrix, b: np.ndarray, sweeps: int = 2) -> np.ndarray:
@@ -212,29 +265,32 @@ def _refined_solve(solver, Hs: sp.csr_matrix, b: np.ndarray, sweeps: int = 2) ->
     return d
 
 
-def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H) -> tuple:
+def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H, E_ref: float | None = None
+                 ) -> tuple:
     """Backtracking on x(a) = u + a^2 d + a v (or u + a d when v is None); expand along v.
 
+    Returns (x, energy, step length a, curved) with x None when no step lowers the energy.
     Near convergence the energy change of a Newton step falls below the energy's roundoff; then
     the step is accepted when it lowers max|g| instead (the energy cannot tell).
     """
     slope = float(g @ d)
     if v is None:
         if slope >= 0:
-            return None, E0, False, False
+            return None, E0, 0.0, False
         noise = 1e-13 * abs(E0)
         res0 = float(np.max(np.abs(g)))
+        E_acc = E0 if E_ref is None else max(E0, E_ref)
         a = 1.0
         for _ in range(30):
             x = asm.full(u + a * d, x_fixed)
             E = asm.energy(x)
-            if np.isfinite(E) and E <= E0 + 1e-4 * a * slope:
-                return x, E, True, False
+            if np.isfinite(E) and E <= E_acc + 1e-4 * a * slope:
+                return x, E, a, False
             if np.isfinite(E) and -a * slope <= 100 * noise and abs(E - E0) <= 100 * noise \
                     and float(np.max(np.abs(asm.gradient(x)))) < res0:
-                return x, E, True, False
+                return x, E, a, False
             a *= 0.5
-        return None, E0, False, False
+        return None, E0, 0.0, False
     Hs_v = asm.symmetric(H) @ v
     curv = float(v @ Hs_v)
 
@@ -254,7 +310,7 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H) -> tuple:
             break
         a *= 0.5
     if best is None:
-        return None, E0, False, False
+        return None, E0, 0.0, False
     # expand while the energy keeps decreasing (escape from the saddle in one go)
     x_b, E_b, a_b = best
     if a_b == 1.0:
@@ -266,4 +322,4 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H) -> tuple:
                 break
             x_b, E_b, a_b = x, E, a
             a *= 2.0
-    return x_b, E_b, True, True
+    return x_b, E_b, a_b, True
