@@ -98,15 +98,21 @@ def _lowest_mode(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int, rng: np.rando
         X = np.c_[x0.reshape(n, 1), X]
     Sm = sp.diags(S)
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)), dtype=float)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "not reaching the requested tolerance": fine here
-            w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=min(1e-4, 1e-2 * tau),
-                          maxiter=60)
+    mu, v = float("nan"), np.ravel(X[:, 0])
+    # a cheap, loose pass first; the tight one only when it found no negative curvature
+    for tol, maxiter in ((1e-4, 20), (min(1e-4, 1e-2 * tau), 60)):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
+                w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=tol, maxiter=maxiter)
+        except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
+            continue
         i = int(np.argmin(w))
-        return float(w[i]), np.ravel(V[:, i])
-    except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
-        return float("nan"), np.ravel(X[:, 0])
+        mu, v = float(w[i]), np.ravel(V[:, i])
+        if mu < 0:
+            break
+        X = V
+    return mu, v
 
 
 def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
