@@ -7,8 +7,10 @@ A case is a pre-stretched fabric with rods printed on it. The coordinates of rod
 the *printed* configuration, i.e. on the fabric while it is stretched by ``eps0`` along x, with
 the origin at the centre of the fabric. Rod lengths ``L`` are printed lengths.
 
-Every model is strict: unknown keys, NaN/inf and out-of-range values raise a
-:class:`pydantic.ValidationError` whose message names the field and the allowed range.
+Every model is strict: unknown keys, NaN/inf, out-of-range values and values of the wrong type
+(``h = "0.3"``, ``N = true``, ``N = 2.0``, ``adaptive = "yes"``: nothing is converted; an
+integer is accepted where a real number is expected) raise a :class:`pydantic.ValidationError`
+whose message names the field and the allowed range.
 :func:`load_case` turns that into a one-line-per-problem :class:`ConfigError`.
 """
 
@@ -19,7 +21,7 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, ValidationError, model_validator
 
 __all__ = [
     "Fabric",
@@ -38,7 +40,9 @@ __all__ = [
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+    model_config = ConfigDict(
+        extra="forbid", allow_inf_nan=False, validate_assignment=True, strict=True
+    )
 
 
 PosFloat = Annotated[float, Field(gt=0.0)]
@@ -66,8 +70,14 @@ class Fabric(_Strict):
 class Segment(_Strict):
     """One straight rod given explicitly (printed configuration, origin at fabric centre)."""
 
-    start: tuple[float, float] = Field(description="(x, y) of the rod's first end [mm]")
-    direction: tuple[float, float] = Field((1.0, 0.0), description="unit direction; along x")
+    # strict=False on the tuple only, so that a TOML/JSON array becomes a tuple; its items stay
+    # strict numbers
+    start: tuple[StrictFloat, StrictFloat] = Field(
+        strict=False, description="(x, y) of the rod's first end [mm]"
+    )
+    direction: tuple[StrictFloat, StrictFloat] = Field(
+        (1.0, 0.0), strict=False, description="unit direction; only (1, 0), along x"
+    )
     length: float = Field(gt=0.0, le=1e4, description="printed length [mm]")
 
     @model_validator(mode="after")
@@ -98,11 +108,23 @@ class Rods(_Strict):
         10.0, ge=0.0, le=1e4, description="edge-to-edge gap between parallel rods [mm]"
     )
     segments: list[Segment] | None = Field(
-        None, description="explicit rods; when given, N, s and L are ignored"
+        None, description="explicit rods (at least one); N, s and L must then be left out"
     )
 
     @model_validator(mode="after")
     def _gap_for_parallel(self) -> Rods:
+        if self.segments is not None:
+            if not self.segments:
+                raise ValueError(
+                    "segments: give at least one rod, or leave segments out and use N, s, L"
+                )
+            given = [k for k in ("N", "s", "L") if k in self.model_fields_set]
+            if given:
+                raise ValueError(
+                    f"segments: {', '.join(given)} cannot be given together with segments "
+                    "(each segment has its own start and length); remove "
+                    f"{'it' if len(given) == 1 else 'them'}"
+                )
         if self.segments is None and self.N > 1 and self.s <= 0.0:
             raise ValueError(
                 "s: must be > 0 for N > 1 parallel rods (s = 0 means one rod N*b wide: "
@@ -240,6 +262,14 @@ class ConfigError(ValueError):
     """A case description is invalid. The message names each bad field and its allowed range."""
 
 
+_TYPE_HINTS = {
+    "float_type": " (a number, written without quotes)",
+    "int_type": " (a whole number, without quotes or decimal point)",
+    "bool_type": " (true or false, without quotes)",
+    "string_type": " (text in quotes)",
+}
+
+
 def _format_validation_error(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
@@ -250,9 +280,10 @@ def _format_validation_error(err: ValidationError) -> str:
         ctx = e.get("ctx") or {}
         bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
         extra = f" (allowed: {bounds})" if bounds else ""
+        hint = _TYPE_HINTS.get(e["type"], "")
         got = e.get("input")
         got_s = f"; got {got!r}" if got is not None and not isinstance(got, dict) else ""
-        lines.append(f"{loc}: {msg}{extra}{got_s}")
+        lines.append(f"{loc}: {msg}{hint}{extra}{got_s}")
     return "\n".join(lines)
 
 
@@ -267,10 +298,29 @@ def case_from_dict(data: dict) -> Case:
 def load_case(path: str | Path) -> Case:
     """Read and validate a TOML case file; raise :class:`ConfigError` with a clear message."""
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a directory, not a case file (give a .toml file)")
     if not p.is_file():
         raise ConfigError(f"{p}: no such file")
     try:
-        data = tomllib.loads(p.read_text())
+        raw = p.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read ({err.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"{p}: not a text file in UTF-8 (byte {err.start}); a case is a TOML text file"
+        ) from None
+    if "\x00" in text:
+        raise ConfigError(f"{p}: binary file (contains NUL bytes); a case is a TOML text file")
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: not valid TOML: {err}") from None
+    if not data:
+        raise ConfigError(
+            f"{p}: empty case (no settings); write at least one setting, e.g. name = "
+            '"my-case", to run the defaults, or use `undulate demo`'
+        )
     return case_from_dict(data)
