@@ -48,7 +48,7 @@ DEMO = {
 
 
 def demo_case() -> Case:
-    """The SPEC's default single rod (h = 0.3 mm) on a 40 mm wide margin, released in 15 steps."""
+    """The default single rod (h = 0.3 mm, L = 100 mm) on a 40 mm margin, 15 release steps."""
     return case_from_dict(DEMO)
 
 
@@ -60,7 +60,7 @@ def simulate(case: Case | dict, progress: ProgressFn | None = None) -> SimResult
 
 
 def analyse(result: SimResult) -> dict[str, Any]:
-    """Shape analysis (SPEC section 4) of every rod of a result."""
+    """Shape analysis (docs/analysis.md) of every rod of a result."""
     from .analysis import analyse_run
 
     # nominal (printed) lengths, one per rod in the order of the centre lines; the measured

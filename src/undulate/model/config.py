@@ -36,6 +36,8 @@ __all__ = [
     "ConfigError",
     "load_case",
     "case_from_dict",
+    "allowed_range",
+    "check_value",
 ]
 
 
@@ -199,7 +201,7 @@ class Dynamics(_Strict):
 
 
 class Case(_Strict):
-    """Everything that defines one run. Defaults are the SPEC defaults (single rod)."""
+    """Everything that defines one run. Defaults: one rod, L = 100 mm, h = 0.3 mm."""
 
     name: str = Field("case", min_length=1, max_length=200)
     fabric: Fabric = Field(default_factory=Fabric)
@@ -324,3 +326,33 @@ def load_case(path: str | Path) -> Case:
             '"my-case", to run the defaults, or use `undulate demo`'
         )
     return case_from_dict(data)
+
+
+_BOUND_SYMBOLS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+
+
+def allowed_range(model: type[BaseModel], name: str) -> str:
+    """The range of a numeric field as text, e.g. ``"> 0, <= 3"`` ("" if unbounded)."""
+    parts = []
+    for meta in model.model_fields[name].metadata:
+        for key, sym in _BOUND_SYMBOLS.items():
+            v = getattr(meta, key, None)
+            if v is not None:
+                parts.append(f"{sym} {v:g}")
+    return ", ".join(parts)
+
+
+def check_value(model: type[BaseModel], name: str, value: object, label: str) -> None:
+    """Validate one field value exactly as a case file would; raise :class:`ConfigError`
+    (one line starting with ``label``). Lets other interfaces share the case's ranges."""
+    try:
+        model.__pydantic_validator__.validate_assignment(
+            model.model_construct(), name, value
+        )
+    except ValidationError as err:
+        e = err.errors()[0]
+        msg = e["msg"].removeprefix("Value error, ")
+        rng = allowed_range(model, name)
+        raise ConfigError(
+            f"{label}: {msg}" + (f" (allowed: {rng})" if rng else "") + f"; got {value!r}"
+        ) from None
