@@ -78,7 +78,8 @@ class Segment(_Strict):
         strict=False, description="(x, y) of the rod's first end [mm]"
     )
     direction: tuple[StrictFloat, StrictFloat] = Field(
-        (1.0, 0.0), strict=False, description="unit direction; only (1, 0), along x"
+        (1.0, 0.0), strict=False, description="direction of the rod",
+        json_schema_extra={"allowed": "[1, 0] only: rods run along +x, the stretch direction"},
     )
     length: float = Field(gt=0.0, le=1e4, description="printed length [mm]")
 
@@ -203,14 +204,18 @@ class Dynamics(_Strict):
 class Case(_Strict):
     """Everything that defines one run. Defaults: one rod, L = 100 mm, h = 0.3 mm."""
 
-    name: str = Field("case", min_length=1, max_length=200)
+    name: str = Field("case", min_length=1, max_length=200, description="label of the run")
     fabric: Fabric = Field(default_factory=Fabric)
     rods: Rods = Field(default_factory=Rods)
     release: Release = Field(default_factory=Release)
     imperfection: Imperfection = Field(default_factory=Imperfection)
     mesh: MeshOptions = Field(default_factory=MeshOptions)
     solver: SolverOptions = Field(default_factory=SolverOptions)
-    mode: Literal["quasi-static", "inertial"] = "quasi-static"
+    mode: Literal["quasi-static", "inertial"] = Field(
+        "quasi-static",
+        description="quasi-static: a stable equilibrium at every release step; inertial: "
+        "damped dynamics ([dynamics])",
+    )
     dynamics: Dynamics = Field(default_factory=Dynamics)
 
     @model_validator(mode="after")
@@ -258,6 +263,22 @@ class Case(_Strict):
         # symmetric about the origin in x so the clamps move symmetrically
         half = max(abs(xmin), abs(xmax))
         return -half, half, ymin, ymax
+
+
+#: Rules that involve more than one field (checked by the validators above; listed in
+#: docs/config.md, each with a test in tests/test_errors_doc.py)
+RULES: tuple[str, ...] = (
+    "`rods.segments`: at least one rod; `rods.N`, `rods.s` and `rods.L` must then be left out "
+    "(each segment has its own `start` and `length`).",
+    "`rods.s > 0` when `rods.N > 1` (`s = 0` would be one rod `N b` wide: write `N = 1`, "
+    "`b = N b`).",
+    "`mesh.dx_far >= mesh.dx_rod`.",
+    "`mesh.dx_rod` <= half the shortest rod (`rods.L`, or the shortest segment `length`).",
+    "Rods must not overlap or touch: their footprints are `rods.b` wide, so two rods that "
+    "overlap in x need `|y_i - y_j| >= b`.",
+    "A case file must hold at least one setting: an empty file is refused (`undulate demo` "
+    "runs the default case; a file with only `name = \"...\"` runs the defaults).",
+)
 
 
 class ConfigError(ValueError):
