@@ -92,7 +92,7 @@ def check_destination(out: str | Path, overwrite: bool = False) -> None:
                 f"it also holds {shown}; move them or give another folder"
             )
     else:
-        anc = _nearest_existing(Path(os.path.abspath(out)).parent)
+        anc = _nearest_existing(out.parent)
         if not anc.is_dir():
             raise OutputError(f"output folder {out}: {anc} is a file, not a folder")
 

@@ -17,6 +17,7 @@ whose message names the field and the allowed range.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
@@ -293,19 +294,55 @@ _TYPE_HINTS = {
 }
 
 
+def _show(v: object) -> str:
+    """A value as it is written in TOML (true, "text", 2.0)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace('"', '\\"') + '"'
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_show(x) for x in v) + "]"
+    return repr(v)
+
+
+def _field_range(loc: tuple) -> str:
+    """The allowed range of the field at ``loc`` (e.g. ("rods", "h")), "" if none."""
+    model: type[BaseModel] = Case
+    for i, part in enumerate(loc):
+        if not isinstance(part, str) or part not in model.model_fields:
+            return ""
+        if i == len(loc) - 1:
+            return allowed_range(model, part)
+        ann = model.model_fields[part].annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            model = ann
+        else:
+            return ""
+    return ""
+
+
 def _format_validation_error(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "case"
-        msg = e["msg"]
-        if msg.startswith("Value error, "):
-            msg = msg[len("Value error, ") :]
-        ctx = e.get("ctx") or {}
-        bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
-        extra = f" (allowed: {bounds})" if bounds else ""
+        loc = ".".join(str(p) for p in e["loc"])
+        msg = e["msg"].removeprefix("Value error, ")
+        # a rule between fields says which field it is about: "dx_far: must be ..."
+        named = re.match(r"([A-Za-z_][\w.]*): (.*)", msg, re.S)
+        if e["type"] == "value_error" and named:
+            loc = f"{loc}.{named[1]}" if loc else named[1]
+            msg = named[2]
+        loc = loc or "case"
+        rng = _field_range(e["loc"]) if e.get("ctx") else ""
+        if not rng:
+            ctx = e.get("ctx") or {}
+            rng = ", ".join(f"{_BOUND_SYMBOLS[k]} {v:g}" for k, v in ctx.items()
+                            if k in _BOUND_SYMBOLS and isinstance(v, int | float))
+        extra = f" (allowed: {rng})" if rng else ""
         hint = _TYPE_HINTS.get(e["type"], "")
         got = e.get("input")
-        got_s = f"; got {got!r}" if got is not None and not isinstance(got, dict) else ""
+        got_s = f"; got {_show(got)}" if got is not None and not isinstance(got, dict) else ""
+        if e["type"] == "value_error":
+            got_s = ""  # the rule's own message says what was wrong
         lines.append(f"{loc}: {msg}{hint}{extra}{got_s}")
     return "\n".join(lines)
 
