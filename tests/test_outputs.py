@@ -104,25 +104,31 @@ def test_study_artifacts_are_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert [p.name for p in art.parent.iterdir()] == ["r1"]
 
 
-@pytest.fixture(scope="module")
-def overwritten_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    """A real tiny run with --overwrite into the folder of an earlier five-rod run."""
-    d = tmp_path_factory.mktemp("overwrite")
+def _run(d: Path, out: Path, *extra: str):
     (d / "tiny.toml").write_text(TINY)
-    out = d / "run"
+    res = CliRunner().invoke(app, ["run", str(d / "tiny.toml"), "--out", str(out), *extra],
+                             env={"COLUMNS": "200"})
+    assert res.exit_code == 0, res.output
+    return res
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """A real tiny run (CliRunner: stdout is not a terminal)."""
+    d = tmp_path_factory.mktemp("run")
+    res = _run(d, d / "run")
+    return d / "run", res.stdout
+
+
+def test_overwrite_replaces_the_previous_run(tmp_path: Path) -> None:
+    """--overwrite into the folder of an earlier five-rod run: no rod_3_*.png stays behind."""
+    out = tmp_path / "run"
     out.mkdir()
     for k in range(5):
         (out / f"rod_{k}_side.png").write_text("old")
         (out / f"rod_{k}_fits.png").write_text("old")
     (out / "metrics.json").write_text('{"old": true}')
-    res = CliRunner().invoke(app, ["run", str(d / "tiny.toml"), "--out", str(out),
-                                   "--overwrite"], env={"COLUMNS": "200"})
-    assert res.exit_code == 0, res.output
-    return out, res.stdout
-
-
-def test_overwrite_replaces_the_previous_run(overwritten_run) -> None:
-    out, _ = overwritten_run
+    _run(tmp_path, out, "--overwrite")
     names = sorted(p.name for p in out.iterdir())
     assert names == ["centerlines.npz", "final.vtu", "metrics.json", "printed.vtu",
                      "rod_0_fits.png", "rod_0_side.png"]
@@ -130,8 +136,8 @@ def test_overwrite_replaces_the_previous_run(overwritten_run) -> None:
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".run.")]
 
 
-def test_every_output_has_the_same_mode(overwritten_run) -> None:
-    out, _ = overwritten_run
+def test_every_output_has_the_same_mode(tiny_run) -> None:
+    out, _ = tiny_run
     umask = os.umask(0o022)
     os.umask(umask)
     for p in out.iterdir():
@@ -139,8 +145,8 @@ def test_every_output_has_the_same_mode(overwritten_run) -> None:
     assert stat.S_IMODE(out.stat().st_mode) == 0o777 & ~umask
 
 
-def test_progress_is_printed_when_not_a_terminal(overwritten_run) -> None:
-    _, stdout = overwritten_run
+def test_progress_is_printed_when_not_a_terminal(tiny_run) -> None:
+    _, stdout = tiny_run
     lines = stdout.splitlines()
     first = [line for line in lines if line.strip()][0]
     assert first.startswith("set-up: mesh, pre-stretch")
@@ -151,10 +157,10 @@ def test_progress_is_printed_when_not_a_terminal(overwritten_run) -> None:
     assert any(line.startswith("writing outputs") for line in lines)
 
 
-def test_analyse_keeps_measured_lengths(overwritten_run, tmp_path: Path) -> None:
+def test_analyse_keeps_measured_lengths(tiny_run, tmp_path: Path) -> None:
     import shutil
 
-    out, _ = overwritten_run
+    out, _ = tiny_run
     d = tmp_path / "copy"
     shutil.copytree(out, d)
     before = json.loads((d / "metrics.json").read_text())
@@ -167,3 +173,24 @@ def test_analyse_keeps_measured_lengths(overwritten_run, tmp_path: Path) -> None
     for b, a in zip(before["rods"], after["rods"], strict=True):
         assert a["L_measured"] == b["L_measured"] and a["L_nominal"] == b["L_nominal"]
     assert stat.S_IMODE((d / "metrics.json").stat().st_mode) & 0o044  # still readable
+
+
+def test_terminal_bar_is_labelled_during_set_up(monkeypatch: pytest.MonkeyPatch) -> None:
+    import io
+
+    from rich.console import Console
+
+    from undulate.interfaces import cli
+    from undulate.model import case_from_dict
+
+    buf = io.StringIO()
+    monkeypatch.setattr(cli, "console", Console(file=buf, force_terminal=True, width=200))
+    with cli._Reporter(case_from_dict({"release": {"steps": 3}})) as rep:
+        assert rep.live
+        rep.stage("set-up: mesh, pre-stretch, printing")
+        rep._prog.refresh()
+        assert "set-up: mesh, pre-stretch, printing" in buf.getvalue()
+        rep.progress(1 / 3, {"step": 1, "release_strain": 0.1667, "newton_iterations": 17,
+                             "max_height": 2.0})
+        rep._prog.refresh()
+    assert "release step 1/3: release strain 0.167, Newton 17 iterations" in buf.getvalue()
