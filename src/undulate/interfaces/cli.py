@@ -98,8 +98,8 @@ def _simulate_and_report(case, out: Path, overwrite: bool) -> None:
         v = rec.get(key)
         t.add_row(key, f"{v:.4g}" if isinstance(v, float) else str(v))
     console.print(t)
-    console.print(escape(f"wrote {out}/final.vtu, metrics.json, centerlines.npz, "
-                         "rod_*_side.png, rod_*_fits.png"))
+    typer.echo(f"wrote {out}/: final.vtu, printed.vtu, metrics.json, centerlines.npz, "
+               "rod_*_side.png, rod_*_fits.png")
 
 
 _OVERWRITE_HELP = ("replace a previous run in --out (its files only); without it a non-empty "
