@@ -136,8 +136,8 @@ def test_cli_theory_table(app):
 
 @pytest.mark.parametrize(
     ("args", "msg"),
-    [(["--h", "-1"], "--h must be"), (["--eps0", "0"], "--eps0 must be"),
-     (["--N", "0"], "--N must be"), (["--s", "-2"], "--s must be")],
+    [(["--h", "-1"], "--h: Input should be greater than 0"), (["--eps0", "0"], "--eps0: "),
+     (["--N", "0"], "--N: "), (["--s", "-2"], "--s: Input should be greater than or equal to 0")],
 )
 def test_cli_theory_validation(app, args, msg):
     res = CliRunner().invoke(app, ["theory", *args])
