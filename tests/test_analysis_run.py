@@ -94,7 +94,8 @@ def test_analyse_dir_merges_metrics_and_plots(tmp_path):
     meta = json.loads((tmp_path / "metrics.json").read_text())
     assert meta["solver"] == {"iters": 3} and meta["case"]["rods"]["h"] == 0.5
     assert meta["family"] == res["family"] == "coherent"
-    assert meta["analysis"]["rods"][0]["L"] == 100.0
+    assert meta["analysis"]["rods"][0]["L_nominal"] == 100.0
+    assert meta["analysis"]["rods"][0]["L_measured"] > 0
     for k, entry in enumerate(meta["rods"]):
         assert entry["energy"] == 1.5 * k and entry["index"] == k
         for key in ("l", "lam", "a", "R", "n", "r2_arcs", "r2_sine"):
@@ -135,8 +136,8 @@ def test_cli_theory_table(app):
 
 @pytest.mark.parametrize(
     ("args", "msg"),
-    [(["--h", "-1"], "--h must be"), (["--eps0", "0"], "--eps0 must be"),
-     (["--N", "0"], "--N must be"), (["--s", "-2"], "--s must be")],
+    [(["--h", "-1"], "--h: Input should be greater than 0"), (["--eps0", "0"], "--eps0: "),
+     (["--N", "0"], "--N: "), (["--s", "-2"], "--s: Input should be greater than or equal to 0")],
 )
 def test_cli_theory_validation(app, args, msg):
     res = CliRunner().invoke(app, ["theory", *args])

@@ -1,4 +1,4 @@
-"""Analytical model (SPEC section 3): hand-computed values, scaling laws, phase map."""
+"""Analytical model (docs/theory.md): hand-computed values, scaling laws, phase map."""
 
 from __future__ import annotations
 

@@ -12,9 +12,11 @@ Units: mm, MPa, N, s.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .interfaces.output import OutputError
 from .model import Case, ConfigError, case_from_dict, load_case
 from .solve import ConvergenceError
 from .solve.release import ProgressFn, SimResult, run_release
@@ -23,6 +25,7 @@ __all__ = [
     "Case",
     "ConfigError",
     "ConvergenceError",
+    "OutputError",
     "SimResult",
     "demo_case",
     "load_case",
@@ -45,7 +48,7 @@ DEMO = {
 
 
 def demo_case() -> Case:
-    """The SPEC's default single rod (h = 0.3 mm) on a 40 mm wide margin, released in 15 steps."""
+    """The default single rod (h = 0.3 mm, L = 100 mm) on a 40 mm margin, 15 release steps."""
     return case_from_dict(DEMO)
 
 
@@ -57,10 +60,12 @@ def simulate(case: Case | dict, progress: ProgressFn | None = None) -> SimResult
 
 
 def analyse(result: SimResult) -> dict[str, Any]:
-    """Shape analysis (SPEC section 4) of every rod of a result."""
+    """Shape analysis (docs/analysis.md) of every rod of a result."""
     from .analysis import analyse_run
 
-    return analyse_run(result.centerlines, L=None)
+    # nominal (printed) lengths, one per rod in the order of the centre lines; the measured
+    # ones are kept beside them (L_nominal, L_measured)
+    return analyse_run(result.centerlines, L=[seg[2] for seg in result.case.segments()])
 
 
 def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
@@ -88,32 +93,61 @@ def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
     return rec
 
 
+StageFn = Callable[[str], None]
+"""``stage(text)``: called when a stage of :func:`run_case` begins (set-up, release, analysis,
+writing); release steps themselves are reported through ``progress(fraction, record)``."""
+
+
 def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool = True,
-             progress: ProgressFn | None = None) -> dict[str, Any]:
+             progress: ProgressFn | None = None, *, overwrite: bool = False,
+             stage: StageFn | None = None) -> dict[str, Any]:
     """Simulate and analyse one case; write its files into ``out`` (if given).
 
     Returns a flat, JSON-serialisable record (solver statistics and mean metrics) used by the
-    study runner. Raises :class:`ConvergenceError` when the release does not converge.
+    study runner. Raises :class:`ConvergenceError` when the release does not converge, and
+    :class:`OutputError` *before simulating* when ``out`` cannot be used (a file, not
+    writable, or not empty without ``overwrite``).
+
+    ``out`` is written atomically: the files go to a hidden ``.OUT.incomplete-XXXX`` folder
+    beside it, which is renamed to ``out`` only when every file is complete. An interrupted
+    run leaves no ``out`` (or the previous one, untouched). With ``overwrite``, a previous
+    run's files in ``out`` are replaced (anything else there is refused).
     """
+    from .interfaces.output import StagedDir
+
     if isinstance(case, dict):
         case = case_from_dict(case)
-    result = simulate(case, progress)
-    ana = analyse(result)
-    rec = _flat_record(result, ana)
-    if out is not None:
-        from .interfaces.output import write_result
-
-        write_result(result, Path(out), extra={"analysis": ana, "family": ana["family"]},
-                     plots=artifacts, vtu=artifacts)
-        _merge_rod_metrics(Path(out), ana)
-        if artifacts:
-            from .analysis import plot_fits
-
-            for k, (cl, r) in enumerate(zip(result.centerlines, ana["rods"], strict=True)):
-                plot_fits(cl, r, Path(out) / f"rod_{k}_fits.png", title=f"rod {k}")
+    staged = StagedDir(out, overwrite=overwrite) if out is not None else None
+    try:
+        if stage is not None:
+            stage("set-up: mesh, pre-stretch, printing")
+        result = simulate(case, progress)
+        if stage is not None:
+            stage("analysis: fitting sines and arc chains")
+        ana = analyse(result)
+        rec = _flat_record(result, ana)
+        if staged is not None:
+            if stage is not None:
+                stage(f"writing outputs to {out}")
+            _write_outputs(result, ana, staged.path, artifacts)
+            staged.commit()
+    finally:
+        if staged is not None:
+            staged.discard()
     return rec
 
 
+def _write_outputs(result: SimResult, ana: dict[str, Any], out: Path, artifacts: bool) -> None:
+    from .interfaces.output import write_result
+
+    write_result(result, out, extra={"analysis": ana, "family": ana["family"]},
+                 plots=artifacts, vtu=artifacts)
+    _merge_rod_metrics(out, ana)
+    if artifacts:
+        from .analysis import plot_fits
+
+        for k, (cl, r) in enumerate(zip(result.centerlines, ana["rods"], strict=True)):
+            plot_fits(cl, r, out / f"rod_{k}_fits.png", title=f"rod {k}")
 def _merge_rod_metrics(out: Path, ana: dict[str, Any]) -> None:
     """Put the per-rod analysis keys into metrics.json's ``rods`` entries."""
     from .study.storage import atomic_write_json, jsonable
@@ -122,6 +156,6 @@ def _merge_rod_metrics(out: Path, ana: dict[str, Any]) -> None:
     m = json.loads(p.read_text())
     for entry, r in zip(m["rods"], ana["rods"], strict=True):
         for key in ("l", "lam", "a", "R", "R_up", "R_down", "n", "r2_arcs", "r2_sine",
-                    "quality"):
+                    "quality", "L_nominal", "L_measured"):
             entry[key] = r.get(key)
     atomic_write_json(p, jsonable(m))

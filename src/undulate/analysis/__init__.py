@@ -1,4 +1,4 @@
-"""Shape analysis of buckled rods (SPEC section 4).
+"""Shape analysis of buckled rods (docs/analysis.md).
 
 Fit a sine and a chain of circular arcs to each rod's centre line, extract the metrics
 ``l, lam, a, R, R_up, R_down, kappa_up, kappa_down, n, ...``, measure the phase coherence of

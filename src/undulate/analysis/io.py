@@ -10,13 +10,15 @@ Directory format (written by the engine)::
 :func:`analyse_dir` adds to metrics.json (keeping every existing key): a top-level
 ``analysis`` (the full :func:`~undulate.analysis.analyse_run` result), a top-level ``family``
 and, in each entry of ``rods`` (matched by ``index``, else by position), the keys
-``l, lam, a, R, n, r2_arcs, r2_sine`` (plus ``quality``). It draws ``DIR/rod_<k>_fits.png``.
+``l, lam, a, R, n, r2_arcs, r2_sine`` (plus ``quality``, ``L_nominal``, ``L_measured``).
+It draws ``DIR/rod_<k>_fits.png``.
 """
 
 from __future__ import annotations
 
 import json
 import re
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +31,9 @@ from .metrics import analyse_run
 
 __all__ = ["load_centerlines", "analyse_dir", "plot_fits", "ROD_KEYS"]
 
-ROD_KEYS: tuple[str, ...] = ("l", "lam", "a", "R", "n", "r2_arcs", "r2_sine", "quality")
+ROD_KEYS: tuple[str, ...] = (
+    "l", "lam", "a", "R", "n", "r2_arcs", "r2_sine", "quality", "L_nominal", "L_measured"
+)
 """Per-rod keys merged into each entry of ``metrics.json["rods"]``."""
 
 
@@ -40,21 +44,52 @@ def load_centerlines(path: str | Path) -> list[np.ndarray]:
     f = p / "centerlines.npz" if p.is_dir() else p
     if not f.is_file():
         raise FileNotFoundError(f"{f}: no centerlines.npz (expected arrays rod0, rod1, ...)")
-    with np.load(f) as data:
-        keys = sorted(
-            (k for k in data.files if re.fullmatch(r"rod\d+", k)), key=lambda k: int(k[3:])
-        )
-        if not keys:
-            raise ValueError(f"{f}: no arrays named rod0, rod1, ... (found {data.files})")
-        return [np.asarray(data[k], dtype=float) for k in keys]
-
-
-def _rod_length(meta: dict[str, Any]) -> float | None:
+    unreadable = f"{f}: not a readable centre-line file (truncated, or not written by undulate)"
     try:
-        L = meta["case"]["rods"]["L"]
-    except (KeyError, TypeError):
-        return None
-    return float(L) if isinstance(L, int | float) and L > 0 else None
+        data = np.load(f, allow_pickle=False)
+    except (zipfile.BadZipFile, EOFError, ValueError, OSError) as exc:
+        raise ValueError(unreadable) from exc
+    if not isinstance(data, np.lib.npyio.NpzFile):  # a bare .npy array
+        raise ValueError(f"{f}: a single array, expected an .npz archive of rod0, rod1, ...")
+    try:
+        with data:
+            keys = sorted(
+                (k for k in data.files if re.fullmatch(r"rod\d+", k)), key=lambda k: int(k[3:])
+            )
+            if not keys:
+                raise ValueError(f"{f}: no arrays named rod0, rod1, ... (found {data.files})")
+            out = [np.asarray(data[k], dtype=float) for k in keys]
+    except ValueError as exc:
+        if str(exc).startswith(str(f)):
+            raise
+        raise ValueError(unreadable) from exc
+    except (zipfile.BadZipFile, EOFError, OSError, KeyError) as exc:
+        raise ValueError(unreadable) from exc
+    for k, a in zip(keys, out, strict=True):
+        if a.ndim != 2 or a.shape[1] not in (2, 3):
+            raise ValueError(f"{f}: array {k} has shape {a.shape}, expected (M, 3)")
+    return out
+
+
+def _positive(v: Any) -> float | None:
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) and v > 0 else None
+
+
+def _rod_lengths(meta: dict[str, Any], n: int) -> list[float | None] | None:
+    """Nominal (printed) length of each rod: ``rods[k].length`` as the engine wrote it, else
+    ``case.rods.L`` for parallel rods; None where unknown."""
+    rods = meta.get("rods")
+    if isinstance(rods, list) and len(rods) == n and all(isinstance(e, dict) for e in rods):
+        Ls = [_positive(e.get("length")) for e in rods]
+        if all(v is not None for v in Ls):
+            return Ls
+    try:
+        r = meta["case"]["rods"]
+        if r.get("segments") is None:
+            return [_positive(r.get("L"))] * n
+    except (KeyError, TypeError, AttributeError):
+        pass
+    return None
 
 
 def plot_fits(xyz: ArrayLike, metrics: dict[str, Any], out: str | Path, *, title: str = "") -> Path:
@@ -96,21 +131,30 @@ def plot_fits(xyz: ArrayLike, metrics: dict[str, Any], out: str | Path, *, title
 def analyse_dir(path: str | Path, *, plots: bool = True) -> dict[str, Any]:
     """Analyse a simulation output directory in place (format: module docstring).
 
-    Uses ``case.rods.L`` from metrics.json as the printed rod length when present. Writes the
+    Uses the nominal rod lengths from metrics.json when present (``rods[k].length``, else
+    ``case.rods.L``); the result keeps them as ``L_nominal`` beside the measured
+    ``L_measured``. A folder still being written (``.NAME.incomplete-XXXX``) is refused. Writes the
     merged ``metrics.json`` and, if ``plots``, ``rod_<k>_fits.png``. Returns the
     :func:`analyse_run` dict plus ``"figures"`` (paths as strings).
     """
+    from ..study.storage import atomic_write_json, jsonable
+
     d = Path(path)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a directory")
+    if ".incomplete-" in d.resolve().name:
+        raise ValueError(f"{d}: an interrupted or unfinished run (its files are incomplete)")
     lines = load_centerlines(d)
     mfile = d / "metrics.json"
     meta: dict[str, Any] = {}
     if mfile.is_file():
-        meta = json.loads(mfile.read_text())
+        try:
+            meta = json.loads(mfile.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{mfile}: not valid JSON (truncated or damaged?): {exc}") from None
         if not isinstance(meta, dict):
             raise ValueError(f"{mfile}: expected a JSON object")
-    result = analyse_run(lines, L=_rod_length(meta))
+    result = analyse_run(lines, L=_rod_lengths(meta, len(lines)))
     rods = meta.get("rods")
     if not isinstance(rods, list):
         rods = []
@@ -126,7 +170,7 @@ def analyse_dir(path: str | Path, *, plots: bool = True) -> dict[str, Any]:
     meta["rods"] = rods
     meta["analysis"] = result
     meta["family"] = result["family"]
-    mfile.write_text(json.dumps(meta, indent=2))
+    atomic_write_json(mfile, jsonable(meta))
     figures = []
     if plots:
         for k, (xyz, r) in enumerate(zip(lines, result["rods"], strict=True)):

@@ -31,6 +31,7 @@ Undefined values are ``None`` (JSON ``null``), never NaN: a flat rod has ``n = 0
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -80,13 +81,14 @@ def _mean(vals: list[float]) -> float | None:
     return float(np.mean(vals)) if vals else None
 
 
-def _empty(cl_len: float, L: float, npts: int, half_range: float) -> dict[str, Any]:
+def _empty(cl_len: float, L: float | None, npts: int, half_range: float) -> dict[str, Any]:
     return {
         "n": 0, "l": None, "l_segments": [], "lam": None, "a": half_range, "R": None,
         "R_up": None, "R_down": None, "kappa_up": None, "kappa_down": None,
         "flat_ends": [0.0, 0.0], "rise": None, "span": None, "r2_arcs": None,
         "r2_sine": None, "rms_arcs": None, "rms_sine": None, "quality": "flat",
-        "length": cl_len, "L": L, "n_points": npts, "sine": None, "arcs": [],
+        "length": cl_len, "L_measured": cl_len, "L_nominal": L, "n_points": npts,
+        "sine": None, "arcs": [],
     }
 
 
@@ -109,8 +111,10 @@ def rod_metrics(xyz: ArrayLike, *, L: float | None = None) -> dict[str, Any]:
     """Shape metrics of one buckled rod (names and conventions: module docstring).
 
     ``xyz`` is the ``(M, 3)`` centre line ordered along the rod (or ``(M, 2)`` ``(x, z)``);
-    ``L`` is the printed rod length used for the flatness threshold (default: the measured
-    polyline length). Quality flags, the first that applies: **"flat"** (z-range below
+    ``L`` is the nominal (printed) rod length, used for the flatness threshold (default: the
+    measured polyline length). Both are returned, named: ``L_nominal`` (``L`` or None) and
+    ``L_measured`` (the polyline length, also ``length``); neither replaces the other.
+    Quality flags, the first that applies: **"flat"** (z-range below
     ``max(FLAT_REL * L, FLAT_ABS)``), **"short"** (fewer than 20 points or fewer than
     ``SHORT_POINTS`` per half-wave), **"noisy"** (``r2_arcs < NOISY_R2``),
     **"end_dominated"** (straight end pieces longer than ``END_DOMINATED_FRACTION`` of the rod),
@@ -120,8 +124,9 @@ def rod_metrics(xyz: ArrayLike, *, L: float | None = None) -> dict[str, Any]:
     cl = prepare(xyz)
     L_ref = float(L) if L is not None else cl.length
     zr = float(np.ptp(cl.z))
+    L_nom = float(L) if L is not None else None
     if zr < max(FLAT_REL * L_ref, FLAT_ABS):
-        return _empty(cl.length, L_ref, len(cl.z), 0.5 * zr)
+        return _empty(cl.length, L_nom, len(cl.z), 0.5 * zr)
     arc_fit: ArcChainFit = fit_arcs(xyz)
     try:
         sine = fit_sine(xyz)
@@ -180,7 +185,8 @@ def rod_metrics(xyz: ArrayLike, *, L: float | None = None) -> dict[str, Any]:
         "rms_sine": _f(sine.rms) if sine else None,
         "quality": quality,
         "length": float(cl.length),
-        "L": L_ref,
+        "L_measured": float(cl.length),
+        "L_nominal": L_nom,
         "n_points": int(len(cl.z)),
         "sine": {k: _f(v) for k, v in sine_d.items()} if sine_d else None,
         "arcs": [
@@ -251,8 +257,13 @@ def classify(rods_xyz: list[ArrayLike], *, L: float | None = None) -> str:
     return analyse_run(list(rods_xyz), L=L)["family"]
 
 
-def analyse_run(centerlines: list[ArrayLike], *, L: float | None = None) -> dict[str, Any]:
+def analyse_run(
+    centerlines: list[ArrayLike], *, L: float | Sequence[float | None] | None = None
+) -> dict[str, Any]:
     """Analyse all rods of one run.
+
+    ``L``: the nominal (printed) length of every rod, or one per rod, or None (see
+    :func:`rod_metrics`).
 
     Returns ``{"rods": [rod_metrics(...) + {"index": k}], "coherence": [coherence(rod k,
     rod k+1)], "family": str, "summary": {...}}``; the summary holds mean/std over the
@@ -261,10 +272,16 @@ def analyse_run(centerlines: list[ArrayLike], *, L: float | None = None) -> dict
     """
     if len(centerlines) == 0:
         raise ValueError("analyse_run: no centre lines given")
+    if L is None or isinstance(L, int | float):
+        Ls: list[float | None] = [L] * len(centerlines)
+    else:
+        Ls = list(L)
+        if len(Ls) != len(centerlines):
+            raise ValueError(f"analyse_run: {len(Ls)} lengths L for {len(centerlines)} rods")
     rods = []
     for k, c in enumerate(centerlines):
         try:
-            m = rod_metrics(c, L=L)
+            m = rod_metrics(c, L=Ls[k])
         except ValueError as exc:
             raise ValueError(f"rod {k}: {exc}") from exc
         rods.append({"index": k, **m})

@@ -1,10 +1,13 @@
 """The ``undulate`` command line (typer).
 
-    undulate demo --out DIR          default single rod (small), all outputs
-    undulate run CASE.toml --out DIR any case described in TOML
-    undulate analyse DIR             shape analysis of a run directory
-    undulate theory --h 0.5          analytical model (SPEC section 3)
-    undulate study run PRESET ...    parametric studies
+    undulate demo --out DIR          default single rod (L = 100 mm), all outputs
+    undulate run CASE.toml --out DIR any case described in TOML (docs/config.md)
+    undulate analyse DIR             shape analysis of a run directory (docs/analysis.md)
+    undulate theory --h 0.5          analytical model (docs/theory.md)
+    undulate study run PRESET ...    parametric studies (docs/studies.md)
+
+Every refused input is one line on stderr naming the file, field or option, exit code 2;
+docs/errors.md lists them.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -24,27 +28,69 @@ app = typer.Typer(
 console = Console()
 
 
-def _simulate_and_report(case, out: Path) -> None:
+def _fail(msg: str, code: int = 2) -> typer.Exit:
+    """Print ``Error: msg`` (one line, no markup) on stderr; return the Exit to raise."""
+    typer.echo(f"Error: {msg}", err=True)
+    return typer.Exit(code=code)
+
+
+def _step_text(rec: dict, steps: int | None) -> str:
+    k = rec.get("step", "?")
+    of = f"/{steps}" if isinstance(k, int) and steps and k <= steps else ""
+    return (f"release step {k}{of}: release strain {rec['release_strain']:.3f}, "
+            f"Newton {rec['newton_iterations']} iterations, max z {rec['max_height']:.2f} mm")
+
+
+class _Reporter:
+    """Stage and release-step progress: a labelled bar on a terminal, else one line each."""
+
+    def __init__(self, case) -> None:
+        self.steps = case.release.steps if case.mode == "quasi-static" else None
+        self.live = console.is_terminal
+        self._prog: Progress | None = None
+
+    def __enter__(self) -> _Reporter:
+        if self.live:
+            self._prog = Progress(
+                TextColumn("[bold]{task.description}"), BarColumn(),
+                TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
+                console=console, transient=False,
+            )
+            self._prog.start()
+            self._task = self._prog.add_task("starting", total=1.0)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._prog is not None:
+            self._prog.stop()
+
+    def stage(self, text: str) -> None:
+        if self._prog is not None:
+            self._prog.update(self._task, description=escape(text))
+        else:
+            print(text, flush=True)
+
+    def progress(self, frac: float, rec: dict) -> None:
+        text = _step_text(rec, self.steps)
+        if self._prog is not None:
+            self._prog.update(self._task, completed=frac, description=escape(text))
+        else:
+            print(text, flush=True)
+
+
+def _simulate_and_report(case, out: Path, overwrite: bool) -> None:
     from .. import api
 
-    with Progress(
-        TextColumn("[bold]release"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-        TextColumn("{task.fields[info]}"), TimeElapsedColumn(), console=console,
-        transient=False, disable=not console.is_terminal,
-    ) as prog:
-        task = prog.add_task("release", total=1.0, info="")
-
-        def progress(frac: float, rec: dict) -> None:
-            prog.update(task, completed=frac, info=(
-                f"strain {rec['release_strain']:.3f}  max z {rec['max_height']:.2f} mm  "
-                f"Newton {rec['newton_iterations']}"))
-
-        try:
-            rec = api.run_case(case, out, progress=progress)
-        except api.ConvergenceError as err:
-            console.print(f"[red]no equilibrium found:[/red] {err}")
-            raise typer.Exit(code=3) from None
-    t = Table(title=f"{case.name}: {out}")
+    try:
+        # the destination is checked (and its staging folder made) before anything runs
+        with _Reporter(case) as rep:
+            rec = api.run_case(case, out, progress=rep.progress, stage=rep.stage,
+                               overwrite=overwrite)
+    except api.OutputError as err:
+        raise _fail(str(err)) from None
+    except api.ConvergenceError as err:
+        raise _fail(f"no equilibrium found: {err}", code=3) from None
+    t = Table(title=escape(f"{case.name}: {out}"))
     for col in ("quantity", "value"):
         t.add_column(col)
     for key in ("family", "n", "l_mean", "lam_mean", "a_mean", "R_mean", "r2_arcs_mean",
@@ -52,22 +98,38 @@ def _simulate_and_report(case, out: Path) -> None:
         v = rec.get(key)
         t.add_row(key, f"{v:.4g}" if isinstance(v, float) else str(v))
     console.print(t)
-    console.print(f"wrote {out}/final.vtu, metrics.json, centerlines.npz, "
-                  "rod_*_side.png, rod_*_fits.png")
+    typer.echo(f"wrote {out}/: final.vtu, printed.vtu, metrics.json, centerlines.npz, "
+               "rod_*_side.png, rod_*_fits.png")
 
 
-@app.command()
-def demo(out: Path = typer.Option(Path("undulate-demo"), "--out", help="output folder")) -> None:
-    """Simulate the default single rod (SPEC defaults, L = 60 mm) and write all outputs."""
+_OVERWRITE_HELP = ("replace a previous run in --out (its files only); without it a non-empty "
+                   "--out is refused")
+
+
+def _demo_help() -> str:
+    from ..api import DEMO
+
+    r = DEMO["rods"]
+    return (f"Simulate the default single rod (h = {r['h']} mm, L = {r['L']:g} mm, "
+            f"{DEMO['fabric']['margin_y']:g} mm of fabric each side, "
+            f"{DEMO['release']['steps']} release steps) and write all outputs.")
+
+
+@app.command(help=_demo_help())
+def demo(
+    out: Path = typer.Option(Path("undulate-demo"), "--out", help="output folder"),
+    overwrite: bool = typer.Option(False, "--overwrite", help=_OVERWRITE_HELP),
+) -> None:
     from ..api import demo_case
 
-    _simulate_and_report(demo_case(), out)
+    _simulate_and_report(demo_case(), out, overwrite)
 
 
 @app.command()
 def run(
     config: Path = typer.Argument(..., help="case description (TOML)"),
     out: Path = typer.Option(..., "--out", help="output folder"),
+    overwrite: bool = typer.Option(False, "--overwrite", help=_OVERWRITE_HELP),
 ) -> None:
     """Run the case described in CONFIG (TOML); see docs/config.md for every field."""
     from ..model import ConfigError, load_case
@@ -75,9 +137,13 @@ def run(
     try:
         case = load_case(config)
     except ConfigError as err:
-        console.print(f"[red]invalid case {config}:[/red]\n{err}")
-        raise typer.Exit(code=2) from None
-    _simulate_and_report(case, out)
+        lines = str(err).splitlines() or ["invalid case"]
+        if not lines[0].startswith(str(config)):  # field errors: name the file on each line
+            lines = [f"{config}: {line}" for line in lines]
+        for line in lines[:-1]:
+            typer.echo(f"Error: {line}", err=True)
+        raise _fail(lines[-1]) from None
+    _simulate_and_report(case, out, overwrite)
 
 
 def _register_subcommands() -> None:
@@ -93,3 +159,7 @@ _register_subcommands()
 
 def main() -> None:
     app()
+
+
+if __name__ == "__main__":
+    main()

@@ -28,13 +28,33 @@ def _fail(msg: str) -> typer.Exit:
     return typer.Exit(code=2)
 
 
-def _check_positive(name: str, value: float | None, *, allow_zero: bool = False) -> None:
-    if value is None:
-        return
-    ok = value >= 0 if allow_zero else value > 0
-    if not ok or value != value or value in (float("inf"), float("-inf")):
-        rng = ">= 0" if allow_zero else "> 0"
-        raise _fail(f"{name} must be a finite number {rng} (got {value})")
+#: theory option -> (case section, field): the options take the case file's ranges
+_THEORY_FIELDS = {
+    "--h": ("Rods", "h"), "--eps0": ("Release", "eps0"), "--b": ("Rods", "b"),
+    "--E-B": ("Rods", "E_B"), "--E": ("Fabric", "E"), "--t": ("Fabric", "t"),
+    "--L": ("Rods", "L"), "--N": ("Rods", "N"), "--s": ("Rods", "s"),
+}
+
+
+def _opt_help(text: str, option: str) -> str:
+    """Help text with the allowed range from the case model; rich markup escaped ("[mm]")."""
+    from rich.markup import escape
+
+    from undulate.model import config
+
+    section, name = _THEORY_FIELDS[option]
+    rng = config.allowed_range(getattr(config, section), name)
+    return escape(f"{text}; allowed {rng}" if rng else text)
+
+
+def _check_theory_option(option: str, value: object) -> None:
+    from undulate.model import config
+
+    section, name = _THEORY_FIELDS[option]
+    try:
+        config.check_value(getattr(config, section), name, value, option)
+    except config.ConfigError as err:
+        raise _fail(str(err)) from None
 
 
 def analyse(
@@ -51,7 +71,8 @@ def analyse(
     try:
         res = analyse_dir(directory, plots=plots)
     except (ValueError, OSError) as exc:
-        raise _fail(f"{directory}: {exc}") from exc
+        msg = str(exc) if str(directory) in str(exc) else f"{directory}: {exc}"
+        raise _fail(msg) from None
     table = Table(title=f"{directory} - family: {res['family']}")
     cols = ("rod", "n", "l", "lam", "a", "R", "r2_arcs", "r2_sine", "quality")
     for c in cols:
@@ -71,16 +92,23 @@ def analyse(
 
 
 def theory(
-    h: Annotated[float, typer.Option("--h", help="rod thickness [mm]")] = 0.5,
-    eps0: Annotated[float, typer.Option("--eps0", help="pre-stretch strain [-]")] = 0.5,
-    b: Annotated[float, typer.Option("--b", help="rod width [mm]")] = 1.0,
-    E_B: Annotated[float, typer.Option("--E-B", help="rod Young's modulus [MPa]")] = 3000.0,
-    E: Annotated[float, typer.Option("--E", help="fabric Young's modulus [MPa]")] = 0.45,
-    t: Annotated[float, typer.Option("--t", help="fabric thickness [mm]")] = 0.4,
-    L: Annotated[float, typer.Option("--L", help="rod length [mm]")] = 100.0,
-    N: Annotated[int, typer.Option("--N", help="number of parallel rods")] = 5,
+    h: Annotated[float, typer.Option("--h", help=_opt_help("rod thickness [mm]", "--h"))] = 0.5,
+    eps0: Annotated[
+        float, typer.Option("--eps0", help=_opt_help("pre-stretch strain [-]", "--eps0"))
+    ] = 0.5,
+    b: Annotated[float, typer.Option("--b", help=_opt_help("rod width [mm]", "--b"))] = 1.0,
+    E_B: Annotated[
+        float, typer.Option("--E-B", help=_opt_help("rod Young's modulus [MPa]", "--E-B"))
+    ] = 3000.0,
+    E: Annotated[
+        float, typer.Option("--E", help=_opt_help("fabric Young's modulus [MPa]", "--E"))
+    ] = 0.45,
+    t: Annotated[float, typer.Option("--t", help=_opt_help("fabric thickness [mm]", "--t"))] = 0.4,
+    L: Annotated[float, typer.Option("--L", help=_opt_help("rod length [mm]", "--L"))] = 100.0,
+    N: Annotated[int, typer.Option("--N", help=_opt_help("number of parallel rods", "--N"))] = 5,
     s: Annotated[
-        float | None, typer.Option("--s", help="gap between rods [mm] (gives the family)")
+        float | None,
+        typer.Option("--s", help=_opt_help("gap between rods [mm] (gives the family)", "--s")),
     ] = None,
     phase_map: Annotated[
         bool, typer.Option("--phase-map", help="draw the (h, s) phase map instead")
@@ -89,15 +117,16 @@ def theory(
         "phase_map.png"
     ),
 ) -> None:
-    """Analytical predictions (SPEC section 3): l, a, R, sagitta, s_hat, n, bundling."""
+    """Analytical predictions (docs/theory.md): l, a, R, sagitta, s_hat, n, bundling.
+
+    Every option takes the same range as the case file (docs/config.md).
+    """
     from undulate import theory as T
 
-    for name, val in (("--h", h), ("--eps0", eps0), ("--b", b), ("--E-B", E_B), ("--E", E),
-                      ("--t", t), ("--L", L)):
-        _check_positive(name, val)
-    _check_positive("--s", s, allow_zero=True)
-    if N < 1:
-        raise _fail(f"--N must be an integer >= 1 (got {N})")
+    for option, val in (("--h", h), ("--eps0", eps0), ("--b", b), ("--E-B", E_B), ("--E", E),
+                        ("--t", t), ("--L", L), ("--N", N), ("--s", s)):
+        if val is not None:
+            _check_theory_option(option, val)
     mat = {"b": b, "E_B": E_B, "E": E, "t": t}
     con = Console()
     if phase_map:

@@ -39,7 +39,8 @@ def run_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
     quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant")] = False,
     workers: Annotated[
-        int | None, typer.Option("--workers", "-j", min=1, help="local processes [cpu count]")
+        int | None,
+        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
     ] = None,
     dask: Annotated[
         str | None, typer.Option("--dask", help="dask.distributed scheduler address")
@@ -122,9 +123,9 @@ def status_cmd(
     t.add_row("pending", str(len(expected) - len(recs)))
     times = [float(r["elapsed_s"]) for r in ok if r.get("elapsed_s") is not None]
     if times:
-        t.add_row("run time min / median / max [s]",
+        t.add_row("run time min / median / max \\[s]",
                   f"{min(times):.3g} / {statistics.median(times):.3g} / {max(times):.3g}")
-        t.add_row("run time total [s]", f"{sum(times):.4g}")
+        t.add_row("run time total \\[s]", f"{sum(times):.4g}")
     if scan.invalid or scan.tmp:
         t.add_row("ignored files (invalid / tmp)", f"{len(scan.invalid)} / {len(scan.tmp)}")
     _out.print(t)

@@ -7,19 +7,22 @@ A case is a pre-stretched fabric with rods printed on it. The coordinates of rod
 the *printed* configuration, i.e. on the fabric while it is stretched by ``eps0`` along x, with
 the origin at the centre of the fabric. Rod lengths ``L`` are printed lengths.
 
-Every model is strict: unknown keys, NaN/inf and out-of-range values raise a
-:class:`pydantic.ValidationError` whose message names the field and the allowed range.
+Every model is strict: unknown keys, NaN/inf, out-of-range values and values of the wrong type
+(``h = "0.3"``, ``N = true``, ``N = 2.0``, ``adaptive = "yes"``: nothing is converted; an
+integer is accepted where a real number is expected) raise a :class:`pydantic.ValidationError`
+whose message names the field and the allowed range.
 :func:`load_case` turns that into a one-line-per-problem :class:`ConfigError`.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, ValidationError, model_validator
 
 __all__ = [
     "Fabric",
@@ -34,11 +37,15 @@ __all__ = [
     "ConfigError",
     "load_case",
     "case_from_dict",
+    "allowed_range",
+    "check_value",
 ]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, validate_assignment=True)
+    model_config = ConfigDict(
+        extra="forbid", allow_inf_nan=False, validate_assignment=True, strict=True
+    )
 
 
 PosFloat = Annotated[float, Field(gt=0.0)]
@@ -66,8 +73,15 @@ class Fabric(_Strict):
 class Segment(_Strict):
     """One straight rod given explicitly (printed configuration, origin at fabric centre)."""
 
-    start: tuple[float, float] = Field(description="(x, y) of the rod's first end [mm]")
-    direction: tuple[float, float] = Field((1.0, 0.0), description="unit direction; along x")
+    # strict=False on the tuple only, so that a TOML/JSON array becomes a tuple; its items stay
+    # strict numbers
+    start: tuple[StrictFloat, StrictFloat] = Field(
+        strict=False, description="(x, y) of the rod's first end [mm]"
+    )
+    direction: tuple[StrictFloat, StrictFloat] = Field(
+        (1.0, 0.0), strict=False, description="direction of the rod",
+        json_schema_extra={"allowed": "[1, 0] only: rods run along +x, the stretch direction"},
+    )
     length: float = Field(gt=0.0, le=1e4, description="printed length [mm]")
 
     @model_validator(mode="after")
@@ -98,11 +112,23 @@ class Rods(_Strict):
         10.0, ge=0.0, le=1e4, description="edge-to-edge gap between parallel rods [mm]"
     )
     segments: list[Segment] | None = Field(
-        None, description="explicit rods; when given, N, s and L are ignored"
+        None, description="explicit rods (at least one); N, s and L must then be left out"
     )
 
     @model_validator(mode="after")
     def _gap_for_parallel(self) -> Rods:
+        if self.segments is not None:
+            if not self.segments:
+                raise ValueError(
+                    "segments: give at least one rod, or leave segments out and use N, s, L"
+                )
+            given = [k for k in ("N", "s", "L") if k in self.model_fields_set]
+            if given:
+                raise ValueError(
+                    f"segments: {', '.join(given)} cannot be given together with segments "
+                    "(each segment has its own start and length); remove "
+                    f"{'it' if len(given) == 1 else 'them'}"
+                )
         if self.segments is None and self.N > 1 and self.s <= 0.0:
             raise ValueError(
                 "s: must be > 0 for N > 1 parallel rods (s = 0 means one rod N*b wide: "
@@ -177,16 +203,20 @@ class Dynamics(_Strict):
 
 
 class Case(_Strict):
-    """Everything that defines one run. Defaults are the SPEC defaults (single rod)."""
+    """Everything that defines one run. Defaults: one rod, L = 100 mm, h = 0.3 mm."""
 
-    name: str = Field("case", min_length=1, max_length=200)
+    name: str = Field("case", min_length=1, max_length=200, description="label of the run")
     fabric: Fabric = Field(default_factory=Fabric)
     rods: Rods = Field(default_factory=Rods)
     release: Release = Field(default_factory=Release)
     imperfection: Imperfection = Field(default_factory=Imperfection)
     mesh: MeshOptions = Field(default_factory=MeshOptions)
     solver: SolverOptions = Field(default_factory=SolverOptions)
-    mode: Literal["quasi-static", "inertial"] = "quasi-static"
+    mode: Literal["quasi-static", "inertial"] = Field(
+        "quasi-static",
+        description="quasi-static: a stable equilibrium at every release step; inertial: "
+        "damped dynamics ([dynamics])",
+    )
     dynamics: Dynamics = Field(default_factory=Dynamics)
 
     @model_validator(mode="after")
@@ -236,23 +266,84 @@ class Case(_Strict):
         return -half, half, ymin, ymax
 
 
+#: Rules that involve more than one field (checked by the validators above; listed in
+#: docs/config.md, each with a test in tests/test_errors_doc.py)
+RULES: tuple[str, ...] = (
+    "`rods.segments`: at least one rod; `rods.N`, `rods.s` and `rods.L` must then be left out "
+    "(each segment has its own `start` and `length`).",
+    "`rods.s > 0` when `rods.N > 1` (`s = 0` would be one rod `N b` wide: write `N = 1`, "
+    "`b = N b`).",
+    "`mesh.dx_far >= mesh.dx_rod`.",
+    "`mesh.dx_rod` <= half the shortest rod (`rods.L`, or the shortest segment `length`).",
+    "Rods must not overlap or touch: their footprints are `rods.b` wide, so two rods that "
+    "overlap in x need `|y_i - y_j| >= b`.",
+    "A case file must hold at least one setting: an empty file is refused (`undulate demo` "
+    "runs the default case; a file with only `name = \"...\"` runs the defaults).",
+)
+
+
 class ConfigError(ValueError):
     """A case description is invalid. The message names each bad field and its allowed range."""
+
+
+_TYPE_HINTS = {
+    "float_type": " (a number, written without quotes)",
+    "int_type": " (a whole number, without quotes or decimal point)",
+    "bool_type": " (true or false, without quotes)",
+    "string_type": " (text in quotes)",
+}
+
+
+def _show(v: object) -> str:
+    """A value as it is written in TOML (true, "text", 2.0)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace('"', '\\"') + '"'
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_show(x) for x in v) + "]"
+    return repr(v)
+
+
+def _field_range(loc: tuple) -> str:
+    """The allowed range of the field at ``loc`` (e.g. ("rods", "h")), "" if none."""
+    model: type[BaseModel] = Case
+    for i, part in enumerate(loc):
+        if not isinstance(part, str) or part not in model.model_fields:
+            return ""
+        if i == len(loc) - 1:
+            return allowed_range(model, part)
+        ann = model.model_fields[part].annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            model = ann
+        else:
+            return ""
+    return ""
 
 
 def _format_validation_error(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "case"
-        msg = e["msg"]
-        if msg.startswith("Value error, "):
-            msg = msg[len("Value error, ") :]
-        ctx = e.get("ctx") or {}
-        bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
-        extra = f" (allowed: {bounds})" if bounds else ""
+        loc = ".".join(str(p) for p in e["loc"])
+        msg = e["msg"].removeprefix("Value error, ")
+        # a rule between fields says which field it is about: "dx_far: must be ..."
+        named = re.match(r"([A-Za-z_][\w.]*): (.*)", msg, re.S)
+        if e["type"] == "value_error" and named:
+            loc = f"{loc}.{named[1]}" if loc else named[1]
+            msg = named[2]
+        loc = loc or "case"
+        rng = _field_range(e["loc"]) if e.get("ctx") else ""
+        if not rng:
+            ctx = e.get("ctx") or {}
+            rng = ", ".join(f"{_BOUND_SYMBOLS[k]} {v:g}" for k, v in ctx.items()
+                            if k in _BOUND_SYMBOLS and isinstance(v, int | float))
+        extra = f" (allowed: {rng})" if rng else ""
+        hint = _TYPE_HINTS.get(e["type"], "")
         got = e.get("input")
-        got_s = f"; got {got!r}" if got is not None and not isinstance(got, dict) else ""
-        lines.append(f"{loc}: {msg}{extra}{got_s}")
+        got_s = f"; got {_show(got)}" if got is not None and not isinstance(got, dict) else ""
+        if e["type"] == "value_error":
+            got_s = ""  # the rule's own message says what was wrong
+        lines.append(f"{loc}: {msg}{hint}{extra}{got_s}")
     return "\n".join(lines)
 
 
@@ -267,10 +358,59 @@ def case_from_dict(data: dict) -> Case:
 def load_case(path: str | Path) -> Case:
     """Read and validate a TOML case file; raise :class:`ConfigError` with a clear message."""
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"{p}: is a directory, not a case file (give a .toml file)")
     if not p.is_file():
         raise ConfigError(f"{p}: no such file")
     try:
-        data = tomllib.loads(p.read_text())
+        raw = p.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read ({err.strerror})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"{p}: not a text file in UTF-8 (byte {err.start}); a case is a TOML text file"
+        ) from None
+    if "\x00" in text:
+        raise ConfigError(f"{p}: binary file (contains NUL bytes); a case is a TOML text file")
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{p}: not valid TOML: {err}") from None
+    if not data:
+        raise ConfigError(
+            f"{p}: empty case (no settings); write at least one setting, e.g. name = "
+            '"my-case", to run the defaults, or use `undulate demo`'
+        )
     return case_from_dict(data)
+
+
+_BOUND_SYMBOLS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+
+
+def allowed_range(model: type[BaseModel], name: str) -> str:
+    """The range of a numeric field as text, e.g. ``"> 0, <= 3"`` ("" if unbounded)."""
+    parts = []
+    for meta in model.model_fields[name].metadata:
+        for key, sym in _BOUND_SYMBOLS.items():
+            v = getattr(meta, key, None)
+            if v is not None:
+                parts.append(f"{sym} {v:g}")
+    return ", ".join(parts)
+
+
+def check_value(model: type[BaseModel], name: str, value: object, label: str) -> None:
+    """Validate one field value exactly as a case file would; raise :class:`ConfigError`
+    (one line starting with ``label``). Lets other interfaces share the case's ranges."""
+    try:
+        model.__pydantic_validator__.validate_assignment(
+            model.model_construct(), name, value
+        )
+    except ValidationError as err:
+        e = err.errors()[0]
+        msg = e["msg"].removeprefix("Value error, ")
+        rng = allowed_range(model, name)
+        raise ConfigError(
+            f"{label}: {msg}" + (f" (allowed: {rng})" if rng else "") + f"; got {value!r}"
+        ) from None

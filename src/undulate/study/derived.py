@@ -27,7 +27,7 @@ __all__ = [
 
 
 def theory() -> dict[str, Any]:
-    """``{"l", "a", "s_hat", "R", "n", "source"}``: the SPEC section 3 functions of
+    """``{"l", "a", "s_hat", "R", "n", "source"}``: the closed-form functions (docs/theory.md) of
     :mod:`undulate.theory` (eq. (1), amplitude, s_hat, R = l/sqrt(24 eps0), odd n nearest L/l)."""
     from undulate import theory as th
 

@@ -88,7 +88,7 @@ def fig_single_rod_h(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
                         label={"l": "eq. (1)", "a": "a formula", "R": "l/√(24ε0)"}[key]
                         + f", ε0={eps0:g}")
             ax.set_ylabel(label)
-        n_pred = th["n"](hh[1:], eps0, L, **mat)  # SPEC section 3: odd integer nearest L/l
+        n_pred = th["n"](hh[1:], eps0, L, **mat)  # docs/theory.md: odd integer nearest L/l
         axes[4].step(hh[1:], n_pred, where="mid", color=color, alpha=0.7,
                      label=f"odd n nearest L/l, ε0={eps0:g}")
         if "r2_arcs_mean" in g:

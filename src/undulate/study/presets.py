@@ -1,4 +1,4 @@
-"""Named studies of SPEC section 5, each with a ``quick`` variant.
+"""Named studies (docs/studies.md), each with a ``quick`` variant.
 
 =========================  =====================================  ==============================
 preset                     full                                   quick

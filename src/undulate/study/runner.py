@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib
 import multiprocessing
 import os
+import shutil
 import socket
 import sys
 import time
@@ -104,6 +105,10 @@ def execute_run(
         result["case_resolved"] = case.model_dump(mode="json")
         out_path = Path(out) if (out is not None and artifacts) else None
         if out_path is not None:
+            # artifacts of an earlier attempt of this run (its record is being replaced) go:
+            # run_case writes the new ones atomically into the then empty folder
+            if out_path.is_dir():
+                shutil.rmtree(out_path)
             out_path.mkdir(parents=True, exist_ok=True)
         record = fn(case, out_path, artifacts=artifacts)
         if not isinstance(record, dict):

@@ -45,6 +45,7 @@ __all__ = [
     "collect",
     "write_table",
     "PARAM_ALIASES",
+    "default_mode",
 ]
 
 RECORD_SCHEMA = 1
@@ -84,6 +85,24 @@ def jsonable(obj: Any) -> Any:
     raise TypeError(f"value of type {type(obj).__name__} is not JSON-serialisable")
 
 
+def current_umask() -> int:
+    """The process umask, read without changing it where the OS allows (Linux /proc)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore (briefly process-wide)
+    os.umask(mask)
+    return mask
+
+
+def default_mode(directory: bool = False) -> int:
+    """Mode a plain ``open()`` / ``mkdir()`` would give: 0666 / 0777 less the umask."""
+    return (0o777 if directory else 0o666) & ~current_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path: Path) -> Iterator[str]:
     """Yield a temporary file name next to ``path``; on success it replaces ``path``.
@@ -95,6 +114,8 @@ def atomic_path(path: Path) -> Iterator[str]:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
+    # mkstemp creates 0600; give the file the mode any other output gets (0644 under umask 022)
+    os.chmod(tmp, default_mode())
     try:
         yield tmp
         os.replace(tmp, path)

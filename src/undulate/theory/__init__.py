@@ -1,4 +1,4 @@
-"""Analytical model of rods buckled on a released pre-stretched fabric (SPEC section 3).
+"""Analytical model of rods buckled on a released pre-stretched fabric (docs/theory.md).
 
 Everything here is closed-form and vectorised over numpy arrays (scalars in, floats out).
 See :mod:`undulate.theory.model` for the formulas and their assumptions, and ``docs/theory.md``.

@@ -1,4 +1,4 @@
-r"""Closed-form predictions for rods printed on a pre-stretched fabric (SPEC section 3).
+r"""Closed-form predictions for rods printed on a pre-stretched fabric (docs/theory.md).
 
 Derivation in one paragraph
 ---------------------------
@@ -22,7 +22,7 @@ geometry of one arc follows from the chord shortening: to the model's small-angl
 
 Three amplitudes, do not mix them up
 ------------------------------------
-* :func:`a` -- the **formula amplitude** of SPEC section 3,
+* :func:`a` -- the **formula amplitude** (docs/theory.md),
   ``(1/(2 eps0)) ((E_B b)/(3 E t))**(1/3) h``. Algebraically it is *identical* to :func:`R`.
 * :func:`sagitta` -- the **exact geometric** height of a circular arc of length ``l`` and
   radius ``R``: ``R (1 - cos(theta/2))`` with ``theta = l / R = sqrt(24 eps0)``. At eps0 = 0.5,
@@ -60,8 +60,8 @@ __all__ = [
     "predictions",
 ]
 
-#: SPEC section 1 defaults used by every function here: rod width b [mm], rod modulus E_B [MPa],
-#: fabric modulus E [MPa], fabric thickness t [mm].
+#: Defaults (those of the case file, docs/config.md) used by every function here: rod width
+#: b [mm], rod modulus E_B [MPa], fabric modulus E [MPa], fabric thickness t [mm].
 DEFAULTS: dict[str, float] = {"b": 1.0, "E_B": 3000.0, "E": 0.45, "t": 0.4}
 
 #: Shape families predicted by :func:`phase_map`, in the order of their integer ``code``.
@@ -86,7 +86,7 @@ def I_B(h: ArrayLike, b: ArrayLike = 1.0) -> Any:
     return _ret(_arr(h) ** 3 * _arr(b) / 12.0)
 
 
-def l(  # noqa: E743 - the SPEC name of the arc length
+def l(  # noqa: E743 - the usual name of the arc length
     h: ArrayLike,
     eps0: ArrayLike,
     *,
@@ -95,7 +95,7 @@ def l(  # noqa: E743 - the SPEC name of the arc length
     E: ArrayLike = 0.45,
     t: ArrayLike = 0.4,
 ) -> Any:
-    """Arc length of one circular segment, SPEC eq. (1) [mm].
+    """Arc length of one circular segment, eq. (1) of docs/theory.md [mm].
 
     ``l = (24 sqrt(6) E_B I_B / (E t))**(1/3) * eps0**(-1/2)``: linear in ``h``, proportional
     to ``(E_B b / (E t))**(1/3)`` and to ``eps0**(-1/2)`` (more pre-stretch, shorter arcs).
@@ -116,7 +116,7 @@ def a(
     E: ArrayLike = 0.45,
     t: ArrayLike = 0.4,
 ) -> Any:
-    """The **formula** amplitude of SPEC section 3 [mm].
+    """The **formula** amplitude (docs/theory.md) [mm].
 
     ``a = (1 / (2 eps0)) * ((E_B b) / (3 E t))**(1/3) * h``. It is algebraically equal to
     :func:`R` (the arc radius), not to the exact sagitta of the arc (:func:`sagitta`) nor to

@@ -1,0 +1,242 @@
+"""Bad inputs and the one line each gets: shared by tests/test_errors_doc.py (which runs every
+case through the real command line and checks the message) and docs/errors.md (the table is
+generated from the same runs, so it cannot drift from what users see).
+
+Each case builds its files in an empty working folder (paths in messages are relative to it)
+and returns the command-line arguments.
+
+    UNDULATE_WRITE_DOCS=1 python -m pytest tests/test_errors_doc.py    # rewrite docs/errors.md
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+TINY = """name = "tiny"
+[rods]
+L = 20.0
+[fabric]
+margin_x = 4.0
+margin_y = 4.0
+[release]
+steps = 3
+[mesh]
+dx_rod = 2.0
+dx_far = 4.0
+"""
+
+
+@dataclass(frozen=True)
+class ErrorCase:
+    id: str
+    group: str
+    what: str  # the bad input, as the table shows it
+    setup: Callable[[Path], list[str]]
+    expect: tuple[str, ...]  # fragments the message must contain
+    code: int = 2
+
+
+def _case_file(text: str | bytes, name: str = "case.toml") -> Callable[[Path], list[str]]:
+    def setup(d: Path) -> list[str]:
+        p = d / name
+        if isinstance(text, bytes):
+            p.write_bytes(text)
+        else:
+            p.write_text(text)
+        return ["run", name, "--out", "out"]
+
+    return setup
+
+
+def _tiny_to(out_setup: Callable[[Path], str], *extra: str) -> Callable[[Path], list[str]]:
+    def setup(d: Path) -> list[str]:
+        (d / "tiny.toml").write_text(TINY)
+        return ["run", "tiny.toml", "--out", out_setup(d), *extra]
+
+    return setup
+
+
+def _out_is_file(d: Path) -> str:
+    (d / "result").write_text("not a folder")
+    return "result"
+
+
+def _out_under_file(d: Path) -> str:
+    (d / "result").write_text("not a folder")
+    return "result/run1"
+
+
+def _out_unwritable(d: Path) -> str:
+    import os
+
+    if os.geteuid() == 0:  # root may write anywhere but in a kernel file system
+        return "/sys/undulate-run"
+    ro = d / "read-only"
+    ro.mkdir()
+    ro.chmod(0o555)
+    return "read-only/run1"
+
+
+def _out_nonempty(d: Path) -> str:
+    o = d / "old-run"
+    o.mkdir()
+    for name in ("metrics.json", "centerlines.npz", "rod_3_side.png"):
+        (o / name).write_text("x")
+    return "old-run"
+
+
+def _out_foreign(d: Path) -> str:
+    o = d / "old-run"
+    o.mkdir()
+    (o / "metrics.json").write_text("{}")
+    (o / "notes.txt").write_text("my notes")
+    return "old-run"
+
+
+def _run_dir(d: Path, name: str = "run1") -> Path:
+    r = d / name
+    r.mkdir()
+    x = np.linspace(-10, 10, 41)
+    z = np.sin(x / 3)
+    np.savez(r / "centerlines.npz", rod0=np.stack([x, 0 * x, z], 1))
+    (r / "metrics.json").write_text(json.dumps({"case": {"rods": {"L": 20.0}}, "rods": []}))
+    return r
+
+
+def _analyse(damage: Callable[[Path], None], name: str = "run1") -> Callable[[Path], list[str]]:
+    def setup(d: Path) -> list[str]:
+        damage(_run_dir(d, name))
+        return ["analyse", name, "--no-plots"]
+
+    return setup
+
+
+def _truncate_npz(r: Path) -> None:
+    f = r / "centerlines.npz"
+    f.write_bytes(f.read_bytes()[:200])
+
+
+def _garbage_npz(r: Path) -> None:
+    (r / "centerlines.npz").write_bytes(bytes(range(256)) * 3)
+
+
+def _pickled_npz(r: Path) -> None:
+    with open(r / "centerlines.npz", "wb") as fh:
+        np.save(fh, np.array([{"rod0": 1}], dtype=object), allow_pickle=True)
+
+
+def _truncate_json(r: Path) -> None:
+    f = r / "metrics.json"
+    f.write_text(f.read_text()[:20])
+
+
+def _no_npz(r: Path) -> None:
+    (r / "centerlines.npz").unlink()
+
+
+SEG = '{ start = [-10.0, 0.0], length = 20.0 }'
+
+CASES: list[ErrorCase] = [
+    # ---- case files --------------------------------------------------------------------
+    ErrorCase("empty", "Case file (`undulate run CASE --out DIR`)", "empty file",
+              _case_file(""), ("case.toml: empty case", "undulate demo")),
+    ErrorCase("comments-only", "Case file (`undulate run CASE --out DIR`)",
+              "only comments", _case_file("# nothing here\n"), ("empty case",)),
+    ErrorCase("binary", "Case file (`undulate run CASE --out DIR`)", "binary file",
+              _case_file(b"\x00\x01\x02rods\x00"), ("case.toml: binary file",)),
+    ErrorCase("latin1", "Case file (`undulate run CASE --out DIR`)",
+              "not UTF-8 (Latin-1 `é`)", _case_file('name = "caf\xe9"\n'.encode("latin-1")),
+              ("case.toml: not a text file in UTF-8",)),
+    ErrorCase("directory", "Case file (`undulate run CASE --out DIR`)", "a directory",
+              lambda d: ((d / "cases").mkdir(), ["run", "cases", "--out", "out"])[1],
+              ("cases: is a directory",)),
+    ErrorCase("missing", "Case file (`undulate run CASE --out DIR`)", "missing file",
+              lambda d: ["run", "nope.toml", "--out", "out"], ("nope.toml: no such file",)),
+    ErrorCase("bad-toml", "Case file (`undulate run CASE --out DIR`)", "`[rods` (bad TOML)",
+              _case_file("[rods\nh = 1\n"), ("not valid TOML",)),
+    ErrorCase("string-number", "Case file (`undulate run CASE --out DIR`)",
+              '`h = "0.3"`', _case_file('[rods]\nh = "0.3"\n'),
+              ("rods.h", "valid number", "without quotes")),
+    ErrorCase("bool-int", "Case file (`undulate run CASE --out DIR`)", "`N = true`",
+              _case_file("[rods]\nN = true\n"), ("rods.N", "valid integer")),
+    ErrorCase("bool-seed", "Case file (`undulate run CASE --out DIR`)", "`seed = true`",
+              _case_file("[imperfection]\nseed = true\n"), ("imperfection.seed", "integer")),
+    ErrorCase("string-bool", "Case file (`undulate run CASE --out DIR`)",
+              '`adaptive = "yes"`', _case_file('[release]\nadaptive = "yes"\n'),
+              ("release.adaptive", "valid boolean")),
+    ErrorCase("float-int", "Case file (`undulate run CASE --out DIR`)", "`N = 2.0`",
+              _case_file("[rods]\nN = 2.0\n"), ("rods.N", "valid integer", "2.0")),
+    ErrorCase("nan", "Case file (`undulate run CASE --out DIR`)", "`h = nan`",
+              _case_file("[rods]\nh = nan\n"), ("rods.h", "finite")),
+    ErrorCase("range", "Case file (`undulate run CASE --out DIR`)", "`eps0 = 5`",
+              _case_file("[release]\neps0 = 5\n"), ("release.eps0", "allowed: > 0, <= 3")),
+    ErrorCase("unknown-key", "Case file (`undulate run CASE --out DIR`)", "`hh = 1` (typo)",
+              _case_file("[rods]\nhh = 1\n"), ("rods.hh", "Extra inputs")),
+    ErrorCase("segments-and-N", "Case file (`undulate run CASE --out DIR`)",
+              "`N`, `s` beside `segments`",
+              _case_file(f"[rods]\nN = 2\ns = 3.0\nsegments = [{SEG}]\n"),
+              ("rods.segments: N, s cannot be given together with segments",)),
+    ErrorCase("segments-empty", "Case file (`undulate run CASE --out DIR`)", "`segments = []`",
+              _case_file("[rods]\nsegments = []\n"), ("rods.segments: give at least one rod",)),
+    ErrorCase("direction", "Case file (`undulate run CASE --out DIR`)",
+              "segment `direction = [0, 1]`",
+              _case_file("[rods]\nsegments = [{ start = [0.0, 0.0], length = 20.0, "
+                         "direction = [0.0, 1.0] }]\n"), ("only rods along +x",)),
+    ErrorCase("dx-far", "Case file (`undulate run CASE --out DIR`)",
+              "`dx_far = 1` below `dx_rod = 2`",
+              _case_file("[mesh]\ndx_rod = 2.0\ndx_far = 1.0\n"),
+              ("mesh.dx_far: must be >= dx_rod",)),
+    ErrorCase("dx-rod", "Case file (`undulate run CASE --out DIR`)",
+              "`dx_rod = 15` for `L = 20`",
+              _case_file("[rods]\nL = 20.0\n[mesh]\ndx_rod = 15.0\ndx_far = 20.0\n"),
+              ("mesh.dx_rod: must be <= half the shortest rod",)),
+    ErrorCase("overlap", "Case file (`undulate run CASE --out DIR`)", "overlapping segments",
+              _case_file("[rods]\nb = 2.0\nsegments = [{ start = [0.0, 0.0], length = 10.0 }, "
+                         "{ start = [5.0, 1.0], length = 10.0 }]\n"), ("overlap",)),
+    # ---- output folder (checked before anything is simulated) ---------------------------
+    ErrorCase("out-file", "Output folder (`--out`), refused before simulating",
+              "`--out` is an existing file", _tiny_to(_out_is_file),
+              ("output folder result: exists and is not a folder",)),
+    ErrorCase("out-under-file", "Output folder (`--out`), refused before simulating",
+              "`--out` inside a file", _tiny_to(_out_under_file), ("is a file, not a folder",)),
+    ErrorCase("out-unwritable", "Output folder (`--out`), refused before simulating",
+              "`--out` where nothing can be written", _tiny_to(_out_unwritable),
+              ("cannot write there",)),
+    ErrorCase("out-nonempty", "Output folder (`--out`), refused before simulating",
+              "`--out` holds an earlier run", _tiny_to(_out_nonempty),
+              ("is not empty", "--overwrite")),
+    ErrorCase("out-foreign", "Output folder (`--out`), refused before simulating",
+              "`--overwrite`, but `--out` holds other files", _tiny_to(_out_foreign,
+                                                                       "--overwrite"),
+              ("replaces only a previous run's files", "notes.txt")),
+    # ---- analyse ------------------------------------------------------------------------
+    ErrorCase("npz-truncated", "Run folder (`undulate analyse DIR`)", "truncated centerlines.npz",
+              _analyse(_truncate_npz), ("run1/centerlines.npz: not a readable",)),
+    ErrorCase("npz-garbage", "Run folder (`undulate analyse DIR`)", "garbage centerlines.npz",
+              _analyse(_garbage_npz), ("run1/centerlines.npz: not a readable",)),
+    ErrorCase("npz-pickle", "Run folder (`undulate analyse DIR`)",
+              "centerlines.npz holding pickled objects", _analyse(_pickled_npz),
+              ("run1/centerlines.npz",)),
+    ErrorCase("json-truncated", "Run folder (`undulate analyse DIR`)", "truncated metrics.json",
+              _analyse(_truncate_json), ("run1/metrics.json: not valid JSON",)),
+    ErrorCase("no-npz", "Run folder (`undulate analyse DIR`)", "not a run folder",
+              _analyse(_no_npz), ("no centerlines.npz",)),
+    ErrorCase("incomplete", "Run folder (`undulate analyse DIR`)",
+              "the hidden folder of an interrupted run",
+              _analyse(lambda r: None, ".run1.incomplete-x1y2"), ("interrupted or unfinished",)),
+    # ---- theory -------------------------------------------------------------------------
+    ErrorCase("theory-eps0", "Analytical model (`undulate theory`): the case file's ranges",
+              "`--eps0 50`", lambda d: ["theory", "--eps0", "50"],
+              ("--eps0", "allowed: > 0, <= 3")),
+    ErrorCase("theory-h", "Analytical model (`undulate theory`): the case file's ranges",
+              "`--h 0`", lambda d: ["theory", "--h", "0"], ("--h", "greater than 0")),
+    ErrorCase("theory-N", "Analytical model (`undulate theory`): the case file's ranges",
+              "`--N 0`", lambda d: ["theory", "--N", "0"], ("--N", ">= 1")),
+    ErrorCase("theory-s", "Analytical model (`undulate theory`): the case file's ranges",
+              "`--s -1`", lambda d: ["theory", "--s", "-1"], ("--s", ">= 0")),
+]
