@@ -171,6 +171,8 @@ def build_unstructured_mesh(
     from scipy.spatial import cKDTree
 
     lines = rod_lines_from_segments(segments)
+    if not lines:
+        raise ValueError("mesh: the unstructured mesh needs at least one rod")
     sx, sy = 1.0 + eps0, lam_y
     scale = np.array([1.0 / sx, 1.0 / sy])
     xmin, xmax, ymin, ymax = (extent[0] / sx, extent[1] / sx, extent[2] / sy, extent[3] / sy)
