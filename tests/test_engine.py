@@ -49,6 +49,19 @@ def test_history_records_each_step(small_result):
     assert {"energy", "max_height", "newton_iterations", "residual"} <= set(hist[-1])
 
 
+def test_unstructured_mesh_runs_end_to_end_and_writes_outputs(tmp_path):
+    """The small case on the unstructured mesh buckles, and its VTU/metrics are written."""
+    case = case_from_dict({**SMALL, "mesh": {**SMALL["mesh"], "kind": "unstructured"}})
+    rec = api.run_case(case, tmp_path)
+    assert rec["converged"]
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["rods"][0]["max_height"] > 2.0
+    import meshio
+
+    mesh = meshio.read(tmp_path / "final.vtu")
+    assert {c.type for c in mesh.cells} == {"triangle", "line"}
+
+
 def test_non_convergence_is_reported_not_returned():
     bad = dict(SMALL, solver={"max_iter": 1}, release={"steps": 1, "adaptive": False})
     with pytest.raises(ConvergenceError) as err:

@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 
 from ..mesh import FabricMesh, RodChain
 from .assemble import ElementGroup
-from .fabric import HINGE_FACTOR, hinge_bending, neo_hookean_membrane
+from .fabric import hinge_bending, neo_hookean_membrane
 from .rod import (
     edge_length,
     node_strains,
@@ -110,7 +110,7 @@ def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float) -> list[Eleme
     a_a = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 2]] - X[hin[:, 0]]))
     a_b = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 3]] - X[hin[:, 0]]))
     D = E * t**3 / (12.0 * (1.0 - nu**2))
-    k = D * HINGE_FACTOR * e_len2 / (a_a + a_b)
+    k = D * mesh.hinge_factor * e_len2 / (a_a + a_b)
     bending = ElementGroup("fabric_bending", hinge_bending, hin, (k,))
     return [membrane, bending]
 

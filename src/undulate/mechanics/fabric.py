@@ -16,13 +16,16 @@ softens, in compression (W -> inf as J -> 0).
 
 Bending (per interior edge, discrete shell hinge, flat rest state)::
 
-    energy = D * HINGE_FACTOR * |e|^2 / (A_a + A_b) * theta^2,    D = E t^3 / (12 (1 - nu^2))
+    energy = D * f * |e|^2 / (A_a + A_b) * theta^2,    D = E t^3 / (12 (1 - nu^2))
 
-where theta is the dihedral angle between the two triangles sharing the edge. On an ideal mesh
-the factor would be 3/2 (edge area (A_a + A_b)/3, integrated mean curvature theta |e| / 2); on
-our structured meshes with alternating diagonals the diagonal hinges also bend, and the factor
-that reproduces (D/2) * integral (2H)^2 dA for cylinders along x and along y (within 10 %) is
-HINGE_FACTOR = 0.57 (``tests/test_mechanics.py::test_fabric_bending_cylinder``).
+where theta is the dihedral angle between the two triangles sharing the edge and f the mesh's
+``hinge_factor`` (a property of the mesh kind). On an equilateral mesh f = 1 reproduces
+(D/2) * integral (2H)^2 dA for a cylinder of any orientation. On the structured meshes with
+alternating diagonals the diagonal hinges also bend, and f = HINGE_FACTOR = 0.57 reproduces
+cylinders along x and along y within 10 % (``tests/test_mechanics.py``), but that mesh is
+anisotropic: a cylinder at 45 degrees stores 6.9 times too much. On Triangle's quality meshes
+f = 0.44 (``undulate.mesh.unstructured.UNSTRUCTURED_HINGE_FACTOR``; x, y and 45 degrees within
+15 %, ``tests/test_mesh_unstructured.py``).
 """
 
 from __future__ import annotations
@@ -55,7 +58,7 @@ def dihedral_angle(x: jnp.ndarray) -> jnp.ndarray:
 
 
 def hinge_bending(x: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:
-    """Bending energy [N mm] of one hinge (4, 3); ``k = D * HINGE_FACTOR * |e|^2 / (A_a + A_b)``."""
+    """Bending energy [N mm] of one hinge (4, 3); ``k = D * f * |e|^2 / (A_a + A_b)``."""
     return k * dihedral_angle(x) ** 2
 
 

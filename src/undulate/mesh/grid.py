@@ -16,16 +16,29 @@ printing is exactly stress-free, and the actual printed positions are reported.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FabricMesh", "RodChain", "graded_coordinates", "build_mesh"]
+__all__ = [
+    "FabricMesh",
+    "RodChain",
+    "graded_coordinates",
+    "build_structured_mesh",
+    "STRUCTURED_HINGE_FACTOR",
+]
+
+STRUCTURED_HINGE_FACTOR = 0.57
+"""Hinge-bending factor of this grid (alternating diagonals), see mechanics/fabric.py."""
 
 
 @dataclass(frozen=True)
 class RodChain:
-    """Node indices of one rod: centre row ``p`` and footprint edge rows ``qm`` (y-) ``qp`` (y+)."""
+    """Node indices of one rod: centre row ``p`` and footprint edge rows ``qm``, ``qp``.
+
+    ``qp`` lies at +b/2 along the rod's in-plane normal (the direction turned by +90 degrees:
+    +y for a rod along +x), ``qm`` at -b/2.
+    """
 
     p: np.ndarray
     qm: np.ndarray
@@ -42,18 +55,25 @@ class FabricMesh:
 
     X: np.ndarray  # (n_nodes, 2) reference coordinates [mm]
     tris: np.ndarray  # (n_tris, 3) node indices, counter-clockwise
-    xs: np.ndarray  # grid x coordinates (reference)
-    ys: np.ndarray  # grid y coordinates (reference)
     rods: list[RodChain]
-    left: np.ndarray  # nodes on the clamped edge x = xmin
-    right: np.ndarray  # nodes on the clamped edge x = xmax
+    left: np.ndarray  # nodes on the clamped edge x = xmin, sorted by y
+    right: np.ndarray  # nodes on the clamped edge x = xmax, sorted by y
+    xs: np.ndarray | None = None  # grid x coordinates (reference); None when unstructured
+    ys: np.ndarray | None = None  # grid y coordinates (reference); None when unstructured
+    # named boundary node sets: "left", "right" (sorted by y), "bottom", "top" (sorted by x)
+    node_sets: dict[str, np.ndarray] = field(default_factory=dict)
+    # factor of the hinge bending energy that suits this kind of mesh (mechanics/fabric.py)
+    hinge_factor: float = STRUCTURED_HINGE_FACTOR
+    kind: str = "structured"
 
     @property
     def n_nodes(self) -> int:
         return int(self.X.shape[0])
 
     def node(self, i: int, j: int) -> int:
-        """Index of the grid node in column i (x) and row j (y)."""
+        """Index of the grid node in column i (x) and row j (y) (structured meshes only)."""
+        if self.xs is None:
+            raise ValueError("mesh.node(i, j): only a structured mesh has grid columns and rows")
         return int(j * self.xs.size + i)
 
     def hinges(self) -> np.ndarray:
@@ -127,7 +147,7 @@ def _graded_interval(
     return np.asarray(left + right[::-1])
 
 
-def build_mesh(
+def build_structured_mesh(
     segments: list[tuple[float, float, float]],
     b: float,
     extent: tuple[float, float, float, float],
@@ -193,4 +213,7 @@ def build_mesh(
         )
     left = np.arange(ny) * nx
     right = np.arange(ny) * nx + nx - 1
-    return FabricMesh(X=X, tris=tris_a, xs=xs, ys=ys, rods=rods, left=left, right=right)
+    node_sets = {"left": left, "right": right, "bottom": np.arange(nx),
+                 "top": (ny - 1) * nx + np.arange(nx)}
+    return FabricMesh(X=X, tris=tris_a, xs=xs, ys=ys, rods=rods, left=left, right=right,
+                      node_sets=node_sets)

@@ -159,11 +159,29 @@ class Imperfection(_Strict):
 
 
 class MeshOptions(_Strict):
-    """Resolution of the graded, rod-conforming triangle mesh (printed configuration)."""
+    """Resolution of the graded, rod-conforming triangle mesh (printed configuration).
 
+    ``kind = "unstructured"``: Triangle mesh, fine only near the rods; element size
+    h = min(h_far, h_near + (grading - 1) * distance to the nearest rod footprint), h_near about
+    1.2 * max(dx_rod, b/2) (see :mod:`undulate.mesh.unstructured`).
+    ``kind = "structured"``: tensor-product grid (rods along x only); spacings dx_rod along the
+    rods, b/2 across them, growing by ``grading`` per cell to dx_far (x) and dy_far (y).
+    """
+
+    kind: Literal["unstructured", "structured"] = Field(
+        "structured", description="unstructured (Triangle) or structured (tensor grid) mesh"
+    )
     dx_rod: float = Field(1.0, gt=0.0, le=20.0, description="node spacing along rods [mm]")
-    dx_far: float = Field(4.0, gt=0.0, le=100.0, description="spacing in x beyond rod ends [mm]")
-    dy_far: float = Field(5.0, gt=0.0, le=100.0, description="largest spacing in y [mm]")
+    dx_far: float = Field(
+        4.0, gt=0.0, le=100.0, description="structured: spacing in x beyond rod ends [mm]"
+    )
+    dy_far: float = Field(
+        5.0, gt=0.0, le=100.0, description="structured: largest spacing in y [mm]"
+    )
+    h_far: float = Field(
+        12.0, gt=0.0, le=200.0,
+        description="unstructured: largest element size [mm] (at least dx_rod)",
+    )
     grading: float = Field(1.5, ge=1.0, le=3.0, description="growth ratio of spacings [-]")
 
     @model_validator(mode="after")

@@ -79,7 +79,8 @@ def prepare(case: Case) -> Simulation:
     m = case.mesh
     mesh = build_mesh(
         case.segments(), r.b, case.fabric_extent(), eps0=eps0, lam_y=lam_y,
-        dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading,
+        dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading, kind=m.kind,
+        h_far=m.h_far,
     )
     sec = RodSection(h=r.h, b=r.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t)
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
