@@ -7,7 +7,12 @@ matrix's inertia (Sylvester), which tells the Newton solver whether it stands at
 a saddle. :class:`LUSolver` (SciPy SuperLU in symmetric mode) is the always-available fallback.
 :class:`PardisoSolver` (MKL PARDISO, symmetric indefinite, optional extra ``fast``) reuses the
 analysis too and reports the inertia itself. ``auto`` chooses among them by a fixed rule on the
-matrix size (see :class:`AutoSolver`), never by timing, so two runs of a case are identical.
+matrix size and the installed packages (:func:`auto_choice`), never by timing, so two runs of a
+case on the same installation use the same solver.
+
+Interface shared by all solvers: ``name``; ``factor(H_upper)`` (upper triangle, CSC; a repeated
+pattern reuses the analysis) returns the number of negative eigenvalues and raises
+:class:`SingularMatrixError` on a zero pivot; ``solve(b)`` uses the last factorization.
 """
 
 from __future__ import annotations
