@@ -5,17 +5,28 @@ the symbolic analysis (ordering, elimination tree, fill pattern) is done once fo
 pattern and reused by every numeric refactorization (``update``). The signs of D give the
 matrix's inertia (Sylvester), which tells the Newton solver whether it stands at a minimum or at
 a saddle. :class:`LUSolver` (SciPy SuperLU in symmetric mode) is the always-available fallback.
+:class:`PardisoSolver` (MKL PARDISO, symmetric indefinite, optional extra ``fast``) reuses the
+analysis too and reports the inertia itself. ``auto`` chooses among them by a fixed rule on the
+matrix size and the installed packages (:func:`auto_choice`), never by timing, so two runs of a
+case on the same installation use the same solver.
+
+Interface shared by all solvers: ``name``; ``factor(H_upper)`` (upper triangle, CSC; a repeated
+pattern reuses the analysis) returns the number of negative eigenvalues and raises
+:class:`SingularMatrixError` on a zero pivot; ``solve(b)`` uses the last factorization.
 """
 
 from __future__ import annotations
 
+import ctypes
 import time
+from functools import cache
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["LDLSolver", "LUSolver", "AutoSolver", "make_solver", "SingularMatrixError"]
+__all__ = ["LDLSolver", "LUSolver", "PardisoSolver", "AutoSolver", "make_solver",
+           "pardiso_available", "SingularMatrixError"]
 
 
 class SingularMatrixError(RuntimeError):
@@ -93,17 +104,159 @@ class LUSolver:
         return self._lu.solve(b)
 
 
-class AutoSolver:
-    """Times QDLDL and SuperLU on the first matrix and keeps the faster one.
+@cache
+def _mkl_pardiso():
+    """MKL's ``pardiso`` entry point, located through pypardiso (extra ``fast``); None if absent."""
+    try:
+        from pypardiso.pardiso_wrapper import PyPardisoSolver
+    except ImportError:
+        return None
+    try:
+        lib = PyPardisoSolver().libmkl
+    except (ImportError, OSError):
+        return None
+    fn = lib.pardiso
+    fn.restype = None
+    return fn
 
-    Neither wins everywhere (measured, numeric refactorization of the Hessian, 2 cores):
-    default single rod, 5,661 unknowns: QDLDL 28 ms, SuperLU 50 ms; five rods, 17,649
-    unknowns: QDLDL 1.81 s, SuperLU 0.63 s (supernodal, BLAS) with about the same fill.
-    Both give the inertia, so the choice changes speed only.
+
+def pardiso_available() -> bool:
+    """True when MKL PARDISO can be loaded (``pip install undulate[fast]``)."""
+    return _mkl_pardiso() is not None
+
+
+class PardisoSolver:
+    """MKL PARDISO, real symmetric indefinite (mtype -2, Bunch-Kaufman pivoting, METIS
+    ordering): the analysis (phase 11) is done once per pattern, every ``factor`` is a numeric
+    refactorization (phase 22), the inertia comes from iparm(23).
+
+    PARDISO perturbs tiny pivots (iparm(10) = 8, i.e. 1e-8 times the norm) instead of stopping;
+    any perturbed pivot (iparm(14) > 0) is reported as :class:`SingularMatrixError`, as QDLDL's
+    zero pivot is. ``solve`` takes one right-hand side (n,) or several (n, k).
     """
 
+    name = "pardiso"
+
     def __init__(self) -> None:
-        self._choice: LDLSolver | LUSolver | None = None
+        self._fn = _mkl_pardiso()
+        if self._fn is None:
+            raise ImportError("MKL PARDISO not found: pip install 'undulate[fast]'")
+        self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's opaque handle
+        self._iparm = np.zeros(64, dtype=np.int32)
+        for k, v in {1: 1, 2: 2, 10: 8, 11: 0, 13: 0, 21: 1, 35: 0}.items():
+            self._iparm[k - 1] = v  # 1-based numbers as in MKL's documentation
+        self._key: tuple | None = None
+        self._factored = False
+
+    def _call(self, phase: int, b: np.ndarray | None = None) -> np.ndarray | None:
+        i32, f64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+        n = self._n
+        if b is None:
+            b = x = np.zeros((n, 1), order="F")
+        else:
+            x = np.zeros_like(b)
+        err = ctypes.c_int32(0)
+        one = ctypes.c_int32(1)
+        # the arrays stay referenced by self between phases: PARDISO keeps pointers to them
+        self._fn(self._pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(one),
+                 ctypes.byref(one), ctypes.byref(ctypes.c_int32(-2)),
+                 ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(n)),
+                 self._a.ctypes.data_as(f64), self._ia.ctypes.data_as(i32),
+                 self._ja.ctypes.data_as(i32), self._perm.ctypes.data_as(i32),
+                 ctypes.byref(ctypes.c_int32(b.shape[1])), self._iparm.ctypes.data_as(i32),
+                 ctypes.byref(ctypes.c_int32(0)), b.ctypes.data_as(f64), x.ctypes.data_as(f64),
+                 ctypes.byref(err))
+        if err.value == -4:
+            raise SingularMatrixError("PARDISO: zero pivot")
+        if err.value != 0:
+            raise RuntimeError(f"PARDISO error {err.value}")
+        return x
+
+    def _release(self) -> None:
+        if self._key is not None:
+            self._call(-1)
+            self._key = None
+            self._factored = False
+
+    def __del__(self) -> None:
+        try:
+            self._release()
+        except Exception:  # noqa: BLE001 (interpreter shutdown)
+            pass
+
+    def factor(self, H_upper: sp.csc_matrix) -> int:
+        """Factor; return the number of negative eigenvalues (inertia)."""
+        key = (H_upper.shape[0], H_upper.nnz, H_upper.indptr.tobytes(), H_upper.indices.tobytes())
+        if key != self._key:
+            self._release()
+            n = H_upper.shape[0]
+            # CSC of the upper triangle -> CSR of the upper triangle (what PARDISO reads):
+            # the permutation of the values is computed once per pattern
+            pos = sp.csc_matrix((np.arange(1, H_upper.nnz + 1, dtype=float), H_upper.indices,
+                                 H_upper.indptr), shape=(n, n)).tocsr()
+            pos.sort_indices()
+            self._n = n
+            self._to_csr = pos.data.astype(np.int64) - 1
+            self._ia = (pos.indptr + 1).astype(np.int32)
+            self._ja = (pos.indices + 1).astype(np.int32)
+            self._perm = np.zeros(n, dtype=np.int32)
+            self._a = np.ascontiguousarray(H_upper.data[self._to_csr], dtype=np.float64)
+            self._call(11)
+            self._key = key
+        else:
+            self._a[:] = H_upper.data[self._to_csr]
+        self._factored = False
+        self._call(22)
+        if not np.all(np.isfinite(self._a)) or self._iparm[13] > 0:
+            raise SingularMatrixError(f"PARDISO perturbed {self._iparm[13]} pivots")
+        self._factored = True
+        return int(self._iparm[22])
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        assert self._factored
+        b = np.asarray(b, dtype=np.float64)
+        x = self._call(33, np.asfortranarray(b.reshape(b.shape[0], -1)))
+        return np.ascontiguousarray(x).reshape(b.shape)
+
+
+#: ``auto``'s size threshold (unknowns), measured on the project's Hessians (docs/benchmarks.md,
+#: "Sparse factorization", 2 cores): below it QDLDL (5,661 unknowns: refactorization 17 ms,
+#: SuperLU 22 ms; PARDISO 12 ms but 3x slower solves, and Newton solves several times per
+#: factorization); from it on PARDISO when installed (16-18k unknowns: 56-75 ms against
+#: 170-300 ms for QDLDL and 180-260 ms for SuperLU), otherwise SuperLU (five rods, 17,649
+#: unknowns: 0.87-0.91 x QDLDL's time).
+AUTO_LARGE_N = 10_000
+
+
+def auto_choice(n: int, pardiso: bool | None = None, qdldl: bool | None = None) -> str:
+    """The solver ``auto`` takes for an n x n Hessian: a fixed rule on n and on which packages
+    are installed (``pardiso`` and ``qdldl`` default to what is importable); no timing."""
+    if pardiso is None:
+        pardiso = pardiso_available()
+    if qdldl is None:
+        qdldl = _qdldl_available()
+    if n < AUTO_LARGE_N and qdldl:
+        return "qdldl"
+    return "pardiso" if pardiso else "splu"
+
+
+def _qdldl_available() -> bool:
+    try:
+        import qdldl  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+_KINDS = {"qdldl": LDLSolver, "splu": LUSolver, "pardiso": PardisoSolver}
+
+
+class AutoSolver:
+    """Picks its solver on the first matrix by :func:`auto_choice` (size and installed
+    packages only), so the choice, hence the run, is deterministic."""
+
+    def __init__(self) -> None:
+        self._choice: LDLSolver | LUSolver | PardisoSolver | None = None
 
     @property
     def name(self) -> str:
@@ -111,20 +264,7 @@ class AutoSolver:
 
     def factor(self, H_upper: sp.csc_matrix) -> int:
         if self._choice is None:
-            best = None
-            for cand in (LDLSolver(), LUSolver()):
-                t = time.perf_counter()
-                try:
-                    n = cand.factor(H_upper)
-                except SingularMatrixError:
-                    continue
-                dt = time.perf_counter() - t
-                if best is None or dt < best[0]:
-                    best = (dt, cand, n)
-            if best is None:
-                raise SingularMatrixError("zero pivot in both QDLDL and SuperLU")
-            _, self._choice, n_neg = best  # the winner keeps its factorization of H_upper
-            return n_neg
+            self._choice = _KINDS[auto_choice(H_upper.shape[0])]()
         return self._choice.factor(H_upper)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
@@ -132,15 +272,13 @@ class AutoSolver:
         return self._choice.solve(b)
 
 
-def make_solver(kind: str = "auto") -> LDLSolver | LUSolver | AutoSolver:
-    """``auto``: the faster of QDLDL and SuperLU on the first matrix (SuperLU alone when
-    QDLDL is not importable); ``qdldl`` or ``splu`` force one."""
-    if kind in ("auto", "qdldl"):
-        try:
-            import qdldl  # noqa: F401
-
-            return AutoSolver() if kind == "auto" else LDLSolver()
-        except ImportError:
-            if kind == "qdldl":
-                raise
-    return LUSolver()
+def make_solver(kind: str = "auto") -> LDLSolver | LUSolver | PardisoSolver | AutoSolver:
+    """``auto``: by :func:`auto_choice` on the first matrix; ``qdldl``, ``splu`` or
+    ``pardiso`` force one (ImportError when its package is missing)."""
+    if kind == "auto":
+        return AutoSolver()
+    if kind == "qdldl":
+        import qdldl  # noqa: F401
+    if kind not in _KINDS:
+        raise ValueError(f"unknown linear solver {kind!r}: auto, {', '.join(_KINDS)}")
+    return _KINDS[kind]()
