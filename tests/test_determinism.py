@@ -79,8 +79,6 @@ def test_two_processes_filling_a_fresh_cache_are_bit_identical(tmp_path: Path) -
     assert a == b == c
 
 
-@pytest.mark.xfail(strict=True, reason="solve/linear.py AutoSolver picks the solver by "
-                   "wall-clock time; its owner is changing it (docs/errors.md)")
 def test_auto_solver_choice_does_not_depend_on_timing(monkeypatch: pytest.MonkeyPatch) -> None:
     import scipy.sparse as sp
 

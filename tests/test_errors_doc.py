@@ -90,11 +90,9 @@ def errors_markdown(messages: dict[str, tuple[list[str], str]]) -> str:
         "",
         "The same case with the same seed on the same machine gives bit-identical results, also",
         "with two processes running at once and sharing the compiled-kernel cache",
-        "(`tests/test_determinism.py`). Known exception, until the solver owner changes it:",
-        "`solver.linear_solver = \"auto\"` picks QDLDL or SuperLU by timing both on the first",
-        "matrix, so on a busy machine two runs can take different solvers and differ in the last",
-        "bits (about 1e-15 mm). Set `linear_solver = \"qdldl\"` or `\"splu\"` for bit-identical",
-        "reruns.",
+        "(`tests/test_determinism.py`). `solver.linear_solver = \"auto\"` chooses the sparse",
+        "solver by the size of the Hessian and by what is installed, never by timing; a run with",
+        "the optional PARDISO package installed may differ from one without it in the last bits.",
         "",
     ]
     return "\n".join(out)

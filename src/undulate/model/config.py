@@ -201,7 +201,7 @@ class SolverOptions(_Strict):
     # soft direction and Newton needs 150-300 damped iterations (measured: h = 0.08, the
     # buckling step took 184; with 60 the step was cut down to its minimum and the run failed)
     max_iter: int = Field(300, ge=1, le=10000, description="Newton iterations per increment")
-    linear_solver: Literal["auto", "qdldl", "splu"] = Field(
+    linear_solver: Literal["auto", "qdldl", "splu", "pardiso"] = Field(
         "auto", description="sparse direct solver"
     )
     negative_curvature: bool = Field(
