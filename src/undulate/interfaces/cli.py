@@ -107,12 +107,12 @@ _OVERWRITE_HELP = ("replace a previous run in --out (its files only); without it
 
 
 def _demo_help() -> str:
-    from ..api import DEMO
+    from ..api import demo_case
 
-    r = DEMO["rods"]
-    return (f"Simulate the default single rod (h = {r['h']} mm, L = {r['L']:g} mm, "
-            f"{DEMO['fabric']['margin_y']:g} mm of fabric each side, "
-            f"{DEMO['release']['steps']} release steps) and write all outputs.")
+    c = demo_case()
+    return (f"Simulate the default single rod (h = {c.rods.h:g} mm, L = {c.rods.L:g} mm, "
+            f"{c.fabric.margin_y:g} mm of fabric each side, "
+            f"{c.release.steps} release steps) and write all outputs.")
 
 
 @app.command(help=_demo_help())

@@ -66,6 +66,8 @@ class NewtonOptions:
     #: Newton steps (positive definite Hessian) are accepted against the highest energy of
     #: the last ``nonmonotone`` iterates (0: monotone Armijo)
     nonmonotone: int = 5
+    #: how many of the lowest negative-curvature modes one curved step follows at most
+    modes: int = 1
 
 
 @dataclass
@@ -83,36 +85,38 @@ class NewtonResult:
     trace: list = field(default_factory=list)
 
 
-def _lowest_mode(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int, rng: np.random.Generator,
-                 x0: np.ndarray | None, tau: float = 1e-4) -> tuple[float, np.ndarray]:
-    """Smallest eigenpair of H v = mu S v (S diagonal), preconditioned by K^-1 = (H + tau S)^-1.
+def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
+                  rng: np.random.Generator, x0: np.ndarray | None, tau: float = 1e-4,
+                  k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k`` smallest eigenpairs of H v = mu S v (S diagonal), preconditioned by
+    K^-1 = (H + tau S)^-1; returns (mu (k,), V (n, k)), lowest first.
 
-    The start block is a random vector plus the previous mode ``x0`` when there is one: a warm
+    The start block is random plus the previous lowest mode ``x0`` when there is one: a warm
     start alone can lock onto a positive mode while a weaker negative one exists (measured on
-    a thin rod: +4.5e-6 returned while mu = -1.1e-5 existed). The residual tolerance follows
-    the shift tau (about the size of the most negative mu), since the eigenvalues that matter
-    here can be 1e-5 of the stiffness.
+    a thin rod: +4.5e-6 returned while mu = -1.1e-5 existed). A cheap, loose pass comes first;
+    a tight one (residual tolerance following the shift tau, about the size of the most
+    negative mu: the eigenvalues that matter here can be 1e-5 of the stiffness) only when the
+    loose pass found no negative curvature.
     """
-    X = rng.standard_normal((n, 1))
+    X = rng.standard_normal((n, max(k, 1)))
     if x0 is not None:
-        X = np.c_[x0.reshape(n, 1), X]
+        X[:, 0] = x0
     Sm = sp.diags(S)
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)), dtype=float)
-    mu, v = float("nan"), np.ravel(X[:, 0])
-    # a cheap, loose pass first; the tight one only when it found no negative curvature
+    mu, V = np.array([np.nan]), X[:, :1]
     for tol, maxiter in ((1e-4, 20), (min(1e-4, 1e-2 * tau), 60)):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
-                w, V = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=tol, maxiter=maxiter)
+                w, W = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=tol, maxiter=maxiter)
         except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
             continue
-        i = int(np.argmin(w))
-        mu, v = float(w[i]), np.ravel(V[:, i])
-        if mu < 0:
+        order = np.argsort(w)
+        mu, V = np.asarray(w)[order], np.asarray(W)[:, order]
+        if mu[0] < 0:
             break
         X = V
-    return mu, v
+    return mu, V
 
 
 def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
@@ -182,20 +186,19 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             d = -solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
-                mu, v = _lowest_mode(asm.symmetric(H), S, solver.solve, u.size, rng, v_prev,
-                                     tau)
+                k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
+                mus, V = _lowest_modes(asm.symmetric(H), S, solver.solve, u.size, rng, v_prev,
+                                       tau, k)
+                mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
                     # equilibrium whose only "negative" curvature is at the level of the
                     # factorization's roundoff relative to the stiffness: marginally stable
                     return result(True, it, f"marginally stable: lowest relative eigenvalue "
                                             f"{mu:.2e}")
-                if not (np.isfinite(mu) and mu < 0):
-                    v = None
-                else:
-                    v_prev = v
-                    if g @ v > 0:
-                        v = -v
+                if np.isfinite(mu) and mu < 0:
+                    v_prev = V[:, 0]
+                    v = _downhill_combination(mus, V, g, S, rng)
                     # give v the size of the shifted Newton step (in the S-norm), at least
                     # a small fraction of the typical node spacing
                     dn = np.sqrt(np.sum(S * d * d))
@@ -226,6 +229,23 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         recent.append(E)
     return result(False, it, f"no stable equilibrium after {it} iterations: max|g| = "
                              f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+
+
+def _downhill_combination(mus: np.ndarray, V: np.ndarray, g: np.ndarray, S: np.ndarray,
+                          rng: np.random.Generator) -> np.ndarray:
+    """Sum of the negative-curvature modes, each S-normalized, weighted by sqrt(-mu) and signed
+    downhill (g . v <= 0; a random sign where g does not tell): several unstable modes are
+    left in one step, not one per Newton iteration (measured: a wide sheet fully released
+    starts its last step with 92 negative pivots, wrinkles of the slack fabric)."""
+    v = np.zeros(V.shape[0])
+    for m, col in zip(mus, V.T, strict=True):
+        if not (np.isfinite(m) and m < 0):
+            continue
+        c = col / np.sqrt(np.sum(S * col * col))
+        gv = float(g @ c)
+        sign = -np.sign(gv) if gv != 0.0 else rng.choice([-1.0, 1.0])
+        v += sign * np.sqrt(-m) * c
+    return v
 
 
 def _jacobi_scale(H: sp.csc_matrix) -> np.ndarray:
