@@ -66,7 +66,8 @@ class Fabric(_Strict):
     # 100 mm is the default: the unstructured mesh makes the far field cheap, and doubling it
     # to 200 mm is checked (docs/model.md, "Fabric width"; tests/test_sheet_width.py).
     margin_y: float = Field(
-        100.0, ge=2.0, le=1e4, description="fabric beyond the outer rods along y, printed state [mm]"
+        100.0, ge=2.0, le=1e4,
+        description="fabric beyond the outer rods along y, printed state [mm]",
     )
 
 
