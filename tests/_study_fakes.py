@@ -99,7 +99,10 @@ def slow_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, A
 
 
 def crash_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, Any]:
-    """Kills its worker process for h == 0.5 (tests worker-crash handling)."""
+    """Kills its worker process for h == 0.5 (tests worker-crash handling); the other runs
+    take a moment, so that they are in flight in the same pool when it dies."""
     if round(case.rods.h, 6) == 0.5:
+        time.sleep(0.2)
         os._exit(3)
+    time.sleep(1.0)
     return metrics(case)

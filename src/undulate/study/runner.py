@@ -45,7 +45,7 @@ __all__ = ["RunFn", "RunSummary", "run_study", "execute_run", "resolve_runner", 
 
 RunFn = Callable[..., dict]
 RUNNER_ENV = "UNDULATE_STUDY_RUNNER"
-_MAX_CRASHES = 2  # a run in flight during this many worker crashes is recorded as failed
+_MAX_CRASHES = 2  # a run that kills its worker this many times, alone, is recorded as failed
 
 
 def resolve_runner(runner: RunFn | str | None) -> RunFn:
@@ -348,9 +348,17 @@ def _run_pool(
     finish: Callable[[RunSpec, dict[str, Any]], None],
     bar: _Progress,
 ) -> None:
-    """Bounded submission to a process pool: at most ``workers`` runs in flight."""
+    """Bounded submission to a process pool: at most ``workers`` runs in flight.
+
+    A worker that dies (a crash of the interpreter, not an exception: those are results)
+    breaks the whole pool, and every run in flight then fails with it, so the culprit is not
+    known. Those runs are retried one at a time in a fresh pool (a *suspect* never shares the
+    pool with another run); a run that kills its worker alone ``_MAX_CRASHES`` times is
+    recorded as failed, and an innocent neighbour is never blamed.
+    """
     queue = list(reversed(todo))
     crashes: dict[str, int] = {}
+    suspects: set[str] = set()
     while queue:
         # spawn, not fork: the engine uses JAX, which is multithreaded (fork can deadlock)
         pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
@@ -361,6 +369,9 @@ def _run_pool(
         try:
             while queue or inflight:
                 while queue and len(inflight) < workers and not broken:
+                    alone = any(r.id in suspects for r in inflight.values())
+                    if alone or (inflight and queue[-1].id in suspects):
+                        break  # a suspect runs alone
                     r = queue.pop()
                     try:
                         fut = pool.submit(execute_run, run_fn, r.case, artifact_dir(r), artifacts)
@@ -380,14 +391,17 @@ def _run_pool(
                         res = fut.result()
                     except BrokenProcessPool:
                         broken = True
-                        crashes[r.id] = crashes.get(r.id, 0) + 1
-                        if crashes[r.id] >= _MAX_CRASHES:
+                        if r.id in suspects and not inflight and len(done) == 1:
+                            crashes[r.id] = crashes.get(r.id, 0) + 1  # it died alone
+                        suspects.add(r.id)
+                        if crashes.get(r.id, 0) >= _MAX_CRASHES:
                             finish(r, _crash_result("worker process died (BrokenProcessPool)"))
                         else:
                             queue.append(r)
                         continue
                     except Exception as err:  # e.g. unpicklable result
                         res = _crash_result(f"{type(err).__name__}: {err}")
+                    suspects.discard(r.id)
                     finish(r, res)
                 if broken and not inflight:
                     break
