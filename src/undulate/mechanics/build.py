@@ -200,13 +200,24 @@ def rod_groups(
     return groups
 
 
-def rod_centrelines(chains: list[RodChain], x: np.ndarray, sec: RodSection) -> list[np.ndarray]:
-    """Rod centre lines (m, 3) at node positions ``x`` (offset along the fabric normal)."""
+def _centre_point(x5: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
     from .rod import centre
 
-    cv = jax.jit(jax.vmap(lambda x5: centre(x5, sec.offset)[0]))
+    return centre(x5, d)[0]
+
+
+_centre_v = jax.jit(jax.vmap(_centre_point, in_axes=(0, None)))
+
+
+def rod_centrelines(chains: list[RodChain], x: np.ndarray, sec: RodSection) -> list[np.ndarray]:
+    """Rod centre lines (m, 3) at node positions ``x`` (offset along the fabric normal).
+
+    One jitted kernel for every call (the offset is an argument, not a constant baked into a
+    new function), so the release loop, which calls this at every step, never retraces.
+    """
     xj = jnp.asarray(x)
-    return [np.asarray(cv(xj[rod_stencils(ch)])) for ch in chains]
+    d = jnp.asarray(sec.offset, dtype=jnp.float64)
+    return [np.asarray(_centre_v(xj[rod_stencils(ch)], d)) for ch in chains]
 
 
 def free_rod(n_nodes: int, length: float, b: float) -> tuple[RodChain, np.ndarray]:

@@ -224,7 +224,12 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
     x_prev = None
     e_prev = None
     while True:
-        e_old, e_new = steps.pop() if steps else (e, max(e - de, 0.0))
+        if steps:
+            e_old, e_new = steps.pop()
+        else:
+            # equal increments add up to eps0 only to roundoff: a remainder of 1e-17 would
+            # otherwise make an extra, empty step
+            e_old, e_new = e, (e - de if e - de > 1e-9 * eps0 else 0.0)
         # predictor: the secant of the last two equilibria when there are two (it follows the
         # buckled branch; measured on the default rod: 146 Newton iterations against 226 for
         # the affine predictor alone, same final state) unless its energy is more than twice
