@@ -13,7 +13,6 @@ sum such contributions, which is exactly the derivative of the composed function
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -22,15 +21,18 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
+from .compiled import CachedJit, cache_root
+
 jax.config.update("jax_enable_x64", True)
 # Compiled kernels are cached on disk: the first run on a machine pays the XLA compilation
-# (tens of seconds for the rod kernels), later runs and worker processes load them.
-if os.environ.get("UNDULATE_JAX_CACHE", "1") != "0":
-    _cache = os.environ.get(
-        "UNDULATE_JAX_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "undulate", "jax")
-    )
-    jax.config.update("jax_compilation_cache_dir", _cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+# (tens of seconds for the rod kernels), later runs and worker processes load them; the traced
+# programs are kept too (undulate.mechanics.compiled), so later processes skip tracing.
+_cache = cache_root()
+if _cache is not None:
+    jax.config.update("jax_compilation_cache_dir", str(_cache))
+    # every kernel, also those that compile in a fraction of a second: 44 of them took 1.8 s
+    # to compile again in each new process with the 0.2 s threshold (measured)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 __all__ = ["ElementGroup", "Assembly", "StrainForm", "strain_form", "strain_form_kernels"]
 
@@ -299,19 +301,36 @@ def kernels_for(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
             batched = strain_form_kernels(sf)
         else:
             batched = custom() if callable(custom) else _group_kernels(fn)
+        label = _disk_label(fn)
         _KERNEL_CACHE[fn] = {
-            name: _with_gather(k, gather_last=(name == "stress_lin"))
+            name: _with_gather(k, gather_last=(name == "stress_lin"),
+                               label=f"{label}.{name}" if label else None)
             for name, k in batched.items()
         }
     return _KERNEL_CACHE[fn]
 
 
-def _with_gather(kernel: Callable, gather_last: bool = False) -> Callable:
+def _disk_label(fn: Callable) -> str | None:
+    """A name that identifies an energy function across processes, or None.
+
+    Only module-level functions of undulate itself qualify (their code is part of the disk
+    cache's key, :mod:`undulate.mechanics.compiled`); a function defined elsewhere (a test, a
+    user's own energy) or a closure is jitted afresh in every process.
+    """
+    mod, qual = getattr(fn, "__module__", ""), getattr(fn, "__qualname__", "")
+    if not mod.startswith("undulate.") or "<" in qual:
+        return None
+    return f"{mod.removeprefix('undulate.')}.{qual}"
+
+
+def _with_gather(kernel: Callable, gather_last: bool = False, label: str | None = None
+                 ) -> Callable:
     """Jit ``kernel(x[nodes], *params)`` as one call ``(x, nodes, *params)``.
 
     Gathering the element's nodes inside the compiled function avoids one eager JAX gather
     per chunk (about 1 ms each on CPU, measured), which dominated cheap kernels. With
     ``gather_last`` the last argument is a global (n_nodes, 3) array gathered the same way.
+    With a ``label`` the traced program is also kept on disk (:class:`CachedJit`).
     """
 
     def gathered(x, nodes, *params):
@@ -319,7 +338,7 @@ def _with_gather(kernel: Callable, gather_last: bool = False) -> Callable:
             return kernel(x[nodes], *params[:-1], params[-1][nodes])
         return kernel(x[nodes], *params)
 
-    return jax.jit(gathered)
+    return CachedJit(gathered, label) if label else jax.jit(gathered)
 
 
 class Assembly:

@@ -15,6 +15,7 @@ from scipy.optimize import brentq
 
 from ..mesh import FabricMesh, RodChain
 from .assemble import ElementGroup
+from .compiled import CachedJit
 from .fabric import hinge_bending, neo_hookean_membrane
 from .rod import (
     edge_length,
@@ -129,9 +130,9 @@ def rod_stencils(chain: RodChain) -> np.ndarray:
     return np.stack([pa, pb, p, chain.qp, chain.qm], axis=1)
 
 
-_edge_len_v = jax.jit(jax.vmap(edge_length, in_axes=(0, None)))
-_vertex_v = jax.jit(jax.vmap(vertex_strains, in_axes=(0, None)))
-_node_v = jax.jit(jax.vmap(node_strains))
+_edge_len_v = CachedJit(jax.vmap(edge_length, in_axes=(0, None)), "build.rod_edge_length")
+_vertex_v = CachedJit(jax.vmap(vertex_strains, in_axes=(0, None)), "build.rod_vertex_strains")
+_node_v = CachedJit(jax.vmap(node_strains), "build.rod_node_strains")
 
 
 def rod_groups(
@@ -206,7 +207,7 @@ def _centre_point(x5: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
     return centre(x5, d)[0]
 
 
-_centre_v = jax.jit(jax.vmap(_centre_point, in_axes=(0, None)))
+_centre_v = CachedJit(jax.vmap(_centre_point, in_axes=(0, None)), "build.rod_centre")
 
 
 def rod_centrelines(chains: list[RodChain], x: np.ndarray, sec: RodSection) -> list[np.ndarray]:

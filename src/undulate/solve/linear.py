@@ -231,12 +231,13 @@ AUTO_LARGE_N = 10_000
 def auto_choice(n: int, pardiso: bool | None = None, qdldl: bool | None = None) -> str:
     """The solver ``auto`` takes for an n x n Hessian: a fixed rule on n and on which packages
     are installed (``pardiso`` and ``qdldl`` default to what is importable); no timing."""
-    if pardiso is None:
-        pardiso = pardiso_available()
     if qdldl is None:
         qdldl = _qdldl_available()
     if n < AUTO_LARGE_N and qdldl:
         return "qdldl"
+    if pardiso is None:
+        # only asked for large matrices: locating MKL (pypardiso globs its install) takes ~2 s
+        pardiso = pardiso_available()
     return "pardiso" if pardiso else "splu"
 
 
