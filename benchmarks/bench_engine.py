@@ -3,6 +3,7 @@
     python benchmarks/bench_engine.py                       # demo + all robustness cases
     python benchmarks/bench_engine.py --only demo single-0.3 five-0.5-10
     python benchmarks/bench_engine.py --json out.json --markdown out.md
+    python benchmarks/bench_engine.py --no-fast     # as without the `fast` extra (no PARDISO)
 
 Cases (default settings unless named):
 * ``demo``: the case of ``undulate demo``.
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -114,22 +116,23 @@ def markdown(rows: list[dict], ys0: float, ys1: float, proj: dict) -> str:
     ys = 0.5 * (ys0 + ys1)
     lines = [
         f"machine: {platform.processor() or platform.machine()}, python "
-        f"{platform.python_version()}; yardstick {ys0:.2f} s before, {ys1:.2f} s after",
+        f"{platform.python_version()}, {os.cpu_count()} cores; yardstick {ys0:.2f} s before, "
+        f"{ys1:.2f} s after",
         "",
         "| case | converged | wall [s] | wall / yardstick | unknowns | Newton its "
-        "| median its/step | max its/step | factor [s] | assembly [s] | n | l [mm] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| median its/step | max its/step | factor [s] | assembly [s] | solver | n | l [mm] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if not r.get("converged"):
             lines.append(f"| {r['case']} | **no**: {r.get('error', '')} | {r['wall_s']:.1f} | "
-                         f"{r['wall_s'] / ys:.1f} | | | | | | | | |")
+                         f"{r['wall_s'] / ys:.1f} | | | | | | | | | |")
             continue
         lines.append(
             f"| {r['case']} | yes | {r['wall_s']:.1f} | {r['wall_s'] / ys:.1f} | "
             f"{r['unknowns']} | {r['newton_iterations']} | {r['median_its_per_step']:g} | "
             f"{r['max_its_per_step']} | {r['factor_s']:.1f} | {r['assembly_s']:.1f} | "
-            f"{r['n']} | {r['l']:.2f} |")
+            f"{r['linear_solver']} | {r['n']} | {r['l']:.2f} |")
     meds = [r["median_its_per_step"] for r in rows if r.get("converged")]
     if meds:
         lines += ["", f"median over cases of the median Newton iterations per release step: "
@@ -144,7 +147,13 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", help="case names (default: all)")
     ap.add_argument("--json")
     ap.add_argument("--markdown")
+    ap.add_argument("--no-fast", action="store_true",
+                    help="choose linear solvers as an install without the `fast` extra would")
     a = ap.parse_args()
+    if a.no_fast:
+        from undulate.solve import linear
+
+        linear.pardiso_available = lambda: False  # what `auto` consults
     all_cases = cases()
     names = a.only or list(all_cases)
     unknown = [n for n in names if n not in all_cases]

@@ -110,8 +110,12 @@ def test_auto_choice_is_a_fixed_rule():
     assert auto_choice(large, pardiso=True, qdldl=True) == "pardiso"
     assert auto_choice(small, pardiso=True, qdldl=True) == "qdldl"
     assert auto_choice(small, pardiso=True, qdldl=False) == "pardiso"
-    assert auto_choice(linear.AUTO_LARGE_N, pardiso=True, qdldl=True) == "pardiso"
-    assert auto_choice(linear.AUTO_LARGE_N - 1, pardiso=True, qdldl=True) == "qdldl"
+    assert auto_choice(linear.AUTO_PARDISO_N, pardiso=True, qdldl=True) == "pardiso"
+    assert auto_choice(linear.AUTO_PARDISO_N - 1, pardiso=True, qdldl=True) == "qdldl"
+    mid = (linear.AUTO_PARDISO_N + linear.AUTO_LARGE_N) // 2  # e.g. the default sheet
+    assert auto_choice(mid, pardiso=True, qdldl=True) == "pardiso"
+    assert auto_choice(mid, pardiso=False, qdldl=True) == "qdldl"
+    assert auto_choice(linear.AUTO_LARGE_N, pardiso=False, qdldl=True) == "splu"
 
 
 @pytest.mark.parametrize("m", [30, 101])  # 900 and 10,201 unknowns: both sides of the threshold

@@ -219,12 +219,15 @@ class PardisoSolver:
         return np.ascontiguousarray(x).reshape(b.shape)
 
 
-#: ``auto``'s size threshold (unknowns), measured on the project's Hessians (docs/benchmarks.md,
-#: "Sparse factorization", 2 cores): below it QDLDL (5,661 unknowns: refactorization 17 ms,
-#: SuperLU 22 ms; PARDISO 12 ms but 3x slower solves, and Newton solves several times per
-#: factorization); from it on PARDISO when installed (16-18k unknowns: 56-75 ms against
-#: 170-300 ms for QDLDL and 180-260 ms for SuperLU), otherwise SuperLU (five rods, 17,649
-#: unknowns: 0.87-0.91 x QDLDL's time).
+#: ``auto``'s size thresholds (unknowns), measured on the project's Hessians (docs/benchmarks.md,
+#: "Sparse factorization", 2 cores). PARDISO (when installed) from AUTO_PARDISO_N on: on the
+#: default sheet (5,256 unknowns, graded unstructured mesh, nnz(L) 0.6 M) one refactorization
+#: took 29-32 ms against 79-87 ms for QDLDL and 91 ms for SuperLU, with equally fast solves;
+#: 16-18k unknowns: 56-75 ms against 170-300 ms (QDLDL) and 180-260 ms (SuperLU). Below it
+#: (2,091 unknowns: 3.9 ms against 4.6 ms) its 3x slower solves and its start-up eat the gain.
+#: Without PARDISO: QDLDL below AUTO_LARGE_N, SuperLU from it on (five rods, 17,649 unknowns:
+#: 0.87-0.91 x QDLDL's time; on the default sheet the two are within 5-15 %).
+AUTO_PARDISO_N = 3_000
 AUTO_LARGE_N = 10_000
 
 
@@ -233,12 +236,14 @@ def auto_choice(n: int, pardiso: bool | None = None, qdldl: bool | None = None) 
     are installed (``pardiso`` and ``qdldl`` default to what is importable); no timing."""
     if qdldl is None:
         qdldl = _qdldl_available()
-    if n < AUTO_LARGE_N and qdldl:
+    if n < AUTO_PARDISO_N and qdldl:
         return "qdldl"
     if pardiso is None:
-        # only asked for large matrices: locating MKL (pypardiso globs its install) takes ~2 s
+        # only asked for larger matrices: locating MKL (pypardiso globs its install) takes ~2 s
         pardiso = pardiso_available()
-    return "pardiso" if pardiso else "splu"
+    if pardiso:
+        return "pardiso"
+    return "qdldl" if (n < AUTO_LARGE_N and qdldl) else "splu"
 
 
 def _qdldl_available() -> bool:
