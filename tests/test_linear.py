@@ -138,3 +138,16 @@ def test_make_solver_kinds():
     if not HAVE_PARDISO:
         with pytest.raises(ImportError):
             make_solver("pardiso")
+
+
+def test_pardiso_runs_on_one_thread_by_default(monkeypatch: pytest.MonkeyPatch):
+    """Same case + seed, same bits: PARDISO is pinned to one thread (UNDULATE_PARDISO_THREADS)."""
+    if not linear.pardiso_available():
+        pytest.skip("MKL PARDISO not installed (extra 'fast')")
+    import ctypes
+
+    from pypardiso.pardiso_wrapper import PyPardisoSolver
+
+    get = PyPardisoSolver().libmkl.MKL_Domain_Get_Max_Threads
+    get.restype = ctypes.c_int
+    assert get(linear._MKL_DOMAIN_PARDISO) == 1

@@ -18,6 +18,7 @@ pattern reuses the analysis) returns the number of negative eigenvalues and rais
 from __future__ import annotations
 
 import ctypes
+import os
 import time
 from functools import cache
 
@@ -117,7 +118,22 @@ def _mkl_pardiso():
         return None
     fn = lib.pardiso
     fn.restype = None
+    # one thread for PARDISO unless asked otherwise: a multithreaded factorization may sum in
+    # a different order from run to run (same case + seed must give the same bits), and on the
+    # 2-core machines measured one thread was as fast as two (62 vs 80 ms); study workers run
+    # in parallel anyway. UNDULATE_PARDISO_THREADS=k overrides it.
+    try:
+        threads = int(os.environ.get("UNDULATE_PARDISO_THREADS", "1"))
+        set_threads = lib.MKL_Domain_Set_Num_Threads
+        set_threads.restype = ctypes.c_int
+        set_threads.argtypes = [ctypes.c_int, ctypes.c_int]
+        set_threads(max(threads, 1), _MKL_DOMAIN_PARDISO)
+    except (AttributeError, ValueError):  # pragma: no cover - other MKL builds
+        pass
     return fn
+
+
+_MKL_DOMAIN_PARDISO = 4  # MKL's domain number for PARDISO (mkl_service.h)
 
 
 def pardiso_available() -> bool:
