@@ -165,12 +165,11 @@ def composite_kernels(
             return block(y.reshape(-1, 3))
 
         J = jax.vmap(jax.jacfwd(bf))(bflat)  # (nb, m, 3kb)
-        Hb = jax.vmap(jax.hessian(bf))(bflat)  # (nb, m, 3kb, 3kb)
         dq = jax.grad(outer)(q.ravel(), *params).reshape(nb, m)
         Hq = jax.hessian(outer)(q.ravel(), *params).reshape(nb, m, nb, m)
         g = jnp.einsum("bm,bmi->bi", dq, J).reshape(xl.shape)
         H = jnp.einsum("bmi,bmcn,cnj->bicj", J, Hq, J)
-        H = H + jnp.einsum("bij,bc->bicj", jnp.einsum("bm,bmij->bij", dq, Hb), jnp.eye(nb))
+        H = H + jnp.einsum("bij,bc->bicj", _weighted_block_hessians(bf, bflat, dq), jnp.eye(nb))
         n = nb * 3 * kb
         return g, H.reshape(n, n)
 
@@ -179,6 +178,17 @@ def composite_kernels(
         "grad": jax.vmap(grad_one),
         "grad_hess": jax.vmap(grad_hess_one),
     }
+
+
+def _weighted_block_hessians(bf: Callable, yb: jnp.ndarray, c: jnp.ndarray) -> jnp.ndarray:
+    """``sum_m c[b, m] d2 q_m(y_b)`` for every block b: the Hessian of one scalar, c_b . bf(y),
+    per block, instead of the m Hessians of bf's outputs contracted afterwards (for the rod's
+    frame, m = 9 outputs of 15 inputs: 9 times fewer second derivatives, the same sum)."""
+
+    def one(y: jnp.ndarray, cb: jnp.ndarray) -> jnp.ndarray:
+        return jax.hessian(lambda yy: jnp.dot(cb, bf(yy)))(y)
+
+    return jax.vmap(one)(yb, c)
 
 
 @dataclass(frozen=True)
@@ -239,13 +249,12 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
         n_q = q.shape[1]
         g = jnp.einsum("bm,bmi->bi", ((k * e) @ Je).reshape(nb, n_q), Jq).reshape(xl.shape)
         s = k * e if s is None else s
-        Hb = jax.vmap(jax.hessian(bf))(xb)  # (nb, mq, 3kb, 3kb)
         Hs = jax.hessian(lambda qq: jnp.dot(s, sf.resid(qq, *p)))(q.ravel())
         Hq = (Je.T * k) @ Je + Hs
         Hq = Hq.reshape(nb, n_q, nb, n_q)
         dq = (s @ Je).reshape(nb, n_q)
         H = jnp.einsum("bmi,bmcn,cnj->bicj", Jq, Hq, Jq)
-        H = H + jnp.einsum("bij,bc->bicj", jnp.einsum("bm,bmij->bij", dq, Hb), jnp.eye(nb))
+        H = H + jnp.einsum("bij,bc->bicj", _weighted_block_hessians(bf, xb, dq), jnp.eye(nb))
         n = xl.size
         return g, H.reshape(n, n)
 
