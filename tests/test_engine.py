@@ -146,3 +146,19 @@ def test_prestretch_is_flat_unfolded_and_quick():
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     asm = Assembly(sim.mesh.n_nodes, sim.fabric, fixed)
     assert asm.energy_by_group(x)["fabric_bending"] < 1e-9
+
+
+@pytest.mark.slow
+def test_first_example_shows_the_studys_waves():
+    """examples/single_rod.toml, the first case a user runs, makes waves (several half-waves
+    of near-circular arcs), not the single strip arch of a narrow sheet."""
+    from pathlib import Path
+
+    from undulate.model import load_case
+
+    case = load_case(Path(__file__).parents[1] / "examples" / "single_rod.toml")
+    ana = api.analyse(api.simulate(case))
+    rod = ana["rods"][0]
+    assert ana["family"] == "waves"
+    assert rod["n"] >= 3 and rod["l"] < 0.5 * case.rods.L
+    assert rod["r2_arcs"] > 0.9

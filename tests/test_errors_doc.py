@@ -91,8 +91,13 @@ def errors_markdown(messages: dict[str, tuple[list[str], str]]) -> str:
         "The same case with the same seed on the same machine gives bit-identical results, also",
         "with two processes running at once and sharing the compiled-kernel cache",
         "(`tests/test_determinism.py`). `solver.linear_solver = \"auto\"` chooses the sparse",
-        "solver by the size of the Hessian and by what is installed, never by timing; a run with",
-        "the optional PARDISO package installed may differ from one without it in the last bits.",
+        "solver by the size of the Hessian and by what is installed, never by timing; MKL",
+        "PARDISO (the optional `fast` extra) runs on one thread for that reason",
+        "(`UNDULATE_PARDISO_THREADS` changes it, at the price of reproducibility). A run with",
+        "PARDISO installed and one without it use different solvers, so their results differ in",
+        "the last bits, and where the release passes a snap of the rod's pattern (a change of the",
+        "number of half-waves) such a difference can end in a different final state:",
+        "docs/model.md, \"Newton with negative curvature\".",
         "",
     ]
     return "\n".join(out)
