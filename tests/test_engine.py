@@ -49,6 +49,9 @@ def test_history_records_each_step(small_result):
     assert all(b > a for a, b in zip(strains, strains[1:], strict=False))
     assert strains.count(0.5) == 1
     assert {"energy", "max_height", "newton_iterations", "residual"} <= set(hist[-1])
+    # max_height is the highest point above the printed level (as in metrics.json), the
+    # deflection the largest excursion either way
+    assert all(h["max_deflection"] >= abs(h["max_height"]) for h in hist)
 
 
 def test_unstructured_mesh_runs_end_to_end_and_writes_outputs(tmp_path):

@@ -38,7 +38,7 @@ def _step_text(rec: dict, steps: int | None) -> str:
     k = rec.get("step", "?")
     of = f"/{steps}" if isinstance(k, int) and steps and k <= steps else ""
     return (f"release step {k}{of}: release strain {rec['release_strain']:.3f}, "
-            f"Newton {rec['newton_iterations']} iterations, max z {rec['max_height']:.2f} mm")
+            f"Newton {rec['newton_iterations']} iterations, max height {rec['max_height']:.2f} mm")
 
 
 class _Reporter:

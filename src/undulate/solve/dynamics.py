@@ -45,7 +45,7 @@ def lumped_masses(sim) -> np.ndarray:
 
 
 def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, progress):
-    from .release import _max_height, clamp_positions
+    from .release import _heights, clamp_positions
 
     dyn = sim.case.dynamics
     eps0 = sim.case.release.eps0
@@ -80,7 +80,7 @@ def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, pro
         x = x_new
         rec = dict(step=k, time=k * dt, release_strain=eps0 - e, clamp_strain=e,
                    energy=asm.energy(x), kinetic=float(0.5 * np.sum(mass[:, None] * v**2)),
-                   max_height=_max_height(sim, x), newton_iterations=res.iterations,
+                   **_heights(sim, x), newton_iterations=res.iterations,
                    negative_steps=res.negative_steps, residual=res.residual)
         history.append(rec)
         if progress is not None:

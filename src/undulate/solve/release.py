@@ -120,9 +120,12 @@ def imperfection_field(n: int, dx: float, amplitude: float, correlation: float,
     return amplitude * z / rms if rms > 0 else np.zeros(n)
 
 
-def _max_height(sim: Simulation, x: np.ndarray) -> float:
-    cl = rod_centrelines(sim.mesh.rods, x, sim.section)
-    return float(max(np.max(np.abs(c[:, 2])) for c in cl)) - sim.section.offset
+def _heights(sim: Simulation, x: np.ndarray) -> dict[str, float]:
+    """Highest point of the rods' centre lines above their printed level (``max_height``, as
+    in metrics.json) and the largest deflection up or down (``max_deflection``)."""
+    z = [c[:, 2] - sim.section.offset for c in rod_centrelines(sim.mesh.rods, x, sim.section)]
+    return dict(max_height=float(max(np.max(zi) for zi in z)),
+                max_deflection=float(max(np.max(np.abs(zi)) for zi in z)))
 
 
 def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
@@ -284,7 +287,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         x = asm.full(res.u, x_pred)
         e = e_new
         rec = dict(step=len(history), release_strain=eps0 - e, clamp_strain=e,
-                   energy=res.energy, max_height=_max_height(sim, x),
+                   energy=res.energy, **_heights(sim, x),
                    newton_iterations=res.iterations, negative_steps=res.negative_steps,
                    residual=res.residual)
         history.append(rec)
