@@ -61,3 +61,10 @@ def test_examples_validate():
 
     for p in sorted(Path(__file__).parents[1].joinpath("examples").glob("*.toml")):
         load_case(p)
+
+
+def test_case_file_with_a_byte_order_mark_is_read(tmp_path):
+    p = tmp_path / "bom.toml"
+    p.write_bytes(b"\xef\xbb\xbf" + b'name = "bom"\n[rods]\nh = 0.4\n')
+    case = load_case(p)
+    assert case.name == "bom" and case.rods.h == 0.4

@@ -393,6 +393,8 @@ def load_case(path: str | Path) -> Case:
         raise ConfigError(
             f"{p}: not a text file in UTF-8 (byte {err.start}); a case is a TOML text file"
         ) from None
+    # a byte-order mark (some editors on Windows write one) is not part of the TOML
+    text = text.removeprefix("\ufeff")
     if "\x00" in text:
         raise ConfigError(f"{p}: binary file (contains NUL bytes); a case is a TOML text file")
     try:
