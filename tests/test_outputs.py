@@ -194,3 +194,23 @@ def test_terminal_bar_is_labelled_during_set_up(monkeypatch: pytest.MonkeyPatch)
                              "max_height": 2.0})
         rep._prog.refresh()
     assert "release step 1/3: release strain 0.167, Newton 17 iterations" in buf.getvalue()
+
+
+def test_staging_folders_of_killed_runs_are_removed(tmp_path: Path) -> None:
+    """A run killed with SIGKILL cannot remove its hidden staging folder; the next run into
+    the same place removes it when its writer (this host, that process id) is gone, and
+    leaves those of live processes alone."""
+    from undulate.interfaces.output import _HOST, INCOMPLETE_TAG, StagedDir
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".run{INCOMPLETE_TAG}{_HOST}-{dead.pid}-abc123"
+    live = tmp_path / f".run{INCOMPLETE_TAG}{_HOST}-{os.getpid()}-def456"
+    foreign = tmp_path / f".run{INCOMPLETE_TAG}otherhost-{dead.pid}-ghi789"
+    for p in (stale, live, foreign):
+        p.mkdir()
+        (p / "metrics.json").write_text("{}")
+    staged = StagedDir(tmp_path / "run")
+    assert not stale.exists() and live.exists() and foreign.exists()
+    staged.discard()
+    assert not staged.path.exists()

@@ -22,9 +22,11 @@ previous run's files, and only those, are replaced).
 
 from __future__ import annotations
 
+import glob
 import os
 import re
 import shutil
+import socket
 import tempfile
 from pathlib import Path
 
@@ -97,6 +99,35 @@ def check_destination(out: str | Path, overwrite: bool = False) -> None:
             raise OutputError(f"output folder {out}: {anc} is a file, not a folder")
 
 
+#: a staging folder's name says who writes it: this host and the writing process's id
+_HOST = re.sub(r"[^A-Za-z0-9_.]", "_", socket.gethostname())[:40] or "host"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def remove_stale_staging(parent: Path, name: str) -> list[Path]:
+    """Delete the staging folders of ``name`` left in ``parent`` by killed runs: those written
+    by a process of this host that no longer exists (a run killed with SIGKILL, or a machine
+    that went down, cannot clean up after itself). Folders of live processes, of other hosts
+    (a shared file system) or without an owner in their name are left alone."""
+    removed = []
+    pat = re.compile(re.escape(f".{name}{INCOMPLETE_TAG}{_HOST}-") + r"(\d+)-")
+    for p in parent.glob(f".{glob.escape(name)}{INCOMPLETE_TAG}*"):
+        m = pat.match(p.name)
+        if m and p.is_dir() and not _alive(int(m.group(1))):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
+
+
 class StagedDir:
     """A run folder written in a hidden sibling and renamed into place when complete.
 
@@ -114,7 +145,10 @@ class StagedDir:
         parent = self._abs.parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
-            tmp = tempfile.mkdtemp(prefix=f".{self._abs.name}{INCOMPLETE_TAG}", dir=parent)
+            remove_stale_staging(parent, self._abs.name)
+            owner = f"{_HOST}-{os.getpid()}"
+            tmp = tempfile.mkdtemp(prefix=f".{self._abs.name}{INCOMPLETE_TAG}{owner}-",
+                                   dir=parent)
             os.chmod(tmp, default_mode(directory=True))  # mkdtemp makes 0700
         except OSError as err:
             raise OutputError(
