@@ -19,7 +19,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["CachedJit", "cache_root", "cached_jit"]
+from ..fileio import atomic_path
+
+__all__ = ["CachedJit", "cache_root"]
 
 
 def cache_root() -> Path | None:
@@ -105,31 +106,9 @@ class CachedJit:
                 data = exp.serialize()
             except Exception:  # noqa: BLE001 - e.g. flatbuffers missing: plain jit
                 return self._jit
-            _write_atomic(path, bytes(data))
+            try:  # concurrent writers of one key write the same bytes; readers never see a part
+                with atomic_path(path) as tmp:
+                    Path(tmp).write_bytes(bytes(data))
+            except OSError:
+                pass  # an unwritable cache only costs the next process a trace
         return jax.jit(exp.call)
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file and a rename (concurrent writers of the
-    same key write the same bytes; a reader never sees half a file). Errors are ignored."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".part")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    except OSError:
-        pass
-
-
-def cached_jit(name: str) -> Callable[[Callable[..., Any]], CachedJit]:
-    """Decorator form: ``@cached_jit("rod_edge_length")``."""
-
-    def wrap(fn: Callable[..., Any]) -> CachedJit:
-        return CachedJit(fn, name)
-
-    return wrap
