@@ -210,6 +210,15 @@ class SolverOptions(_Strict):
     negative_curvature: bool = Field(
         True, description="follow negative-curvature directions past bifurcations"
     )
+    # 8, not 1: where the release leaves the slack fabric with many unstable wrinkle modes at
+    # once (the demo's last step starts with 92 negative pivots), following them one per
+    # iteration took 48 iterations of tiny steps, and the non-monotone Newton steps after it
+    # carried the rod out of its still-stable five-arc state into a three-arc one (239
+    # iterations); with 8 modes per step the same step took 42 and stayed on the stable branch
+    modes: int = Field(
+        8, ge=1, le=64,
+        description="negative-curvature modes one curved step follows at most",
+    )
 
 
 class Dynamics(_Strict):

@@ -169,7 +169,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     so = case.solver
     opts = NewtonOptions(rtol=so.rtol, force_scale=sim.force_scale, max_iter=so.max_iter,
                          negative_curvature=so.negative_curvature,
-                         linear_solver=so.linear_solver)
+                         linear_solver=so.linear_solver, modes=so.modes)
     x_print, pre = prestretch(sim, opts)
     rods = rod_groups(sim.mesh.rods, x_print, sim.section)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
