@@ -12,7 +12,8 @@ case on the same installation use the same solver.
 
 Interface shared by all solvers: ``name``; ``factor(H_upper)`` (upper triangle, CSC; a repeated
 pattern reuses the analysis) returns the number of negative eigenvalues and raises
-:class:`SingularMatrixError` on a zero pivot; ``solve(b)`` uses the last factorization.
+:class:`SingularMatrixError` on a zero pivot; ``solve(b)`` uses the last factorization, for one
+right-hand side (n,) or a block of them (n, k).
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ class LDLSolver:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         assert self._solver is not None
+        if b.ndim == 2:  # QDLDL solves one right-hand side at a time
+            return np.column_stack([self.solve(b[:, j]) for j in range(b.shape[1])])
         return np.asarray(self._solver.solve(np.ascontiguousarray(b)))
 
 

@@ -91,18 +91,24 @@ def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
     """The ``k`` smallest eigenpairs of H v = mu S v (S diagonal), preconditioned by
     K^-1 = (H + tau S)^-1; returns (mu (k,), V (n, k)), lowest first.
 
-    The start block is random plus the previous lowest mode ``x0`` when there is one: a warm
-    start alone can lock onto a positive mode while a weaker negative one exists (measured on
-    a thin rod: +4.5e-6 returned while mu = -1.1e-5 existed). A cheap, loose pass comes first;
+    The start block is the previous iteration's modes ``x0`` (n,) or (n, j) when there are
+    any, filled up with random vectors, and random otherwise: a warm start alone can lock onto a
+    positive mode while a weaker negative one exists (measured on a thin rod: +4.5e-6 returned
+    while mu = -1.1e-5 existed). A cheap, loose pass comes first;
     a tight one (residual tolerance following the shift tau, about the size of the most
     negative mu: the eigenvalues that matter here can be 1e-5 of the stiffness) only when the
     loose pass found no negative curvature.
     """
     X = rng.standard_normal((n, max(k, 1)))
     if x0 is not None:
-        X[:, 0] = x0
+        # with a block, keep one random column: the warm modes alone may miss a new one
+        x0 = x0.reshape(n, -1)[:, : max(X.shape[1] - 1, 1)]
+        X[:, : x0.shape[1]] = x0
     Sm = sp.diags(S)
-    Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)), dtype=float)
+    # the preconditioner takes LOBPCG's whole block in one solve (PARDISO solves k right-hand
+    # sides at once; a matvec-only operator would solve them one by one)
+    Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)),
+                         matmat=lambda R: K_solve(np.asarray(R)), dtype=float)
     mu, V = np.array([np.nan]), X[:, :1]
     for tol, maxiter in ((1e-4, 20), (min(1e-4, 1e-2 * tau), 60)):
         try:
@@ -197,7 +203,10 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                     return result(True, it, f"marginally stable: lowest relative eigenvalue "
                                             f"{mu:.2e}")
                 if np.isfinite(mu) and mu < 0:
-                    v_prev = V[:, 0]
+                    # the negative modes found warm-start the next search (all of them: with
+                    # one, the other k - 1 start from random vectors every time)
+                    neg = np.asarray(mus) < 0
+                    v_prev = V[:, neg] if np.all(np.isfinite(mus)) else V[:, :1]
                     v = _downhill_combination(mus, V, g, S, rng)
                     # give v the size of the shifted Newton step (in the S-norm), at least
                     # a small fraction of the typical node spacing
