@@ -150,6 +150,26 @@ def test_collect_table(tmp_path: Path) -> None:
     assert rec["case_resolved"]["solver"]["max_iter"] >= 1 and rec["version"]
 
 
+def test_csv_table_leads_with_the_documented_columns(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from undulate.interfaces.cli import app
+    from undulate.study.storage import CSV_COLUMNS
+
+    study = _small_study([0.2, 0.42, 0.6])
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    res = CliRunner().invoke(app, ["study", "table", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    df = pd.read_csv(tmp_path / "table.csv")
+    assert tuple(df.columns[: len(CSV_COLUMNS)]) == CSV_COLUMNS
+    assert len(df) == 3 and sorted(df["status"]) == ["failed", "ok", "ok"]
+    ok = df[df["status"] == "ok"]
+    assert ok["l_mean"].notna().all() and ok["h"].tolist() == [0.2, 0.6]
+    # a folder as --out is one clear line, not a traceback
+    res = CliRunner().invoke(app, ["study", "table", str(tmp_path), "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "is a folder" in res.output and "Traceback" not in res.output
+
+
 def test_progress_bar_on_a_terminal(tmp_path: Path) -> None:
     import io
 

@@ -88,7 +88,39 @@ def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
     for key in ("l", "lam", "a", "R", "n", "r2_arcs", "r2_sine", "quality"):
         rec[f"rods_{key}"] = json.dumps([r.get(key) for r in ana["rods"]])
     rec["coherence"] = json.dumps(ana.get("coherence"))
+    rec.update(onset(result))
     return rec
+
+
+#: a rod counts as lifted once it has left its printed level by this many imperfection RMS
+ONSET_HEIGHT_FACTOR = 10.0
+
+
+def onset(result: SimResult) -> dict[str, Any]:
+    """When buckling began, from the release history (release strains, as fractions of 1).
+
+    ``onset_release_strain``: the first release step whose equilibrium needed a negative-
+    curvature step, i.e. where the flat (or previous) branch had lost stability; None if none
+    did. ``onset_height_release_strain``: the first step where some rod's centre line left its
+    printed level by more than ``ONSET_HEIGHT_FACTOR`` x the imperfection RMS (the sheet curls
+    smoothly from the first step because the rod sits above the fabric's mid-surface, so this
+    one can come before any instability). ``rods_onset_release_strain`` (JSON list): the same
+    height rule per rod, which tells which rods go first.
+    """
+    hist = result.history
+    amp = result.case.imperfection.amplitude
+    thr = ONSET_HEIGHT_FACTOR * amp if amp > 0 else 1e-3
+    stab = next((h["release_strain"] for h in hist if h.get("negative_steps", 0) > 0), None)
+    height = next((h["release_strain"] for h in hist
+                   if h.get("max_deflection", 0.0) > thr), None)
+    n_rods = len(result.centerlines)
+    per_rod = []
+    for k in range(n_rods):
+        per_rod.append(next((h["release_strain"] for h in hist
+                             if len(h.get("rod_max_deflection", [])) > k
+                             and h["rod_max_deflection"][k] > thr), None))
+    return {"onset_release_strain": stab, "onset_height_release_strain": height,
+            "rods_onset_release_strain": json.dumps(per_rod)}
 
 
 StageFn = Callable[[str], None]

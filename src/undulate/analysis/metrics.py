@@ -267,8 +267,8 @@ def analyse_run(
 
     Returns ``{"rods": [rod_metrics(...) + {"index": k}], "coherence": [coherence(rod k,
     rod k+1)], "family": str, "summary": {...}}``; the summary holds mean/std over the
-    non-flat rods of ``l``, ``lam``, ``a``, ``R`` and of the fits' ``r2_arcs``/``r2_sine``, and
-    the median ``n``. JSON-serialisable.
+    non-flat rods of ``l``, ``lam``, ``a``, ``R``, ``R_up``, ``R_down`` and of the fits'
+    ``r2_arcs``/``r2_sine``, and the median ``n``. JSON-serialisable.
     """
     if len(centerlines) == 0:
         raise ValueError("analyse_run: no centre lines given")
@@ -288,7 +288,7 @@ def analyse_run(
     coh = [coherence(centerlines[k], centerlines[k + 1]) for k in range(len(centerlines) - 1)]
     summary: dict[str, Any] = {}
     live = [r for r in rods if r["n"] > 0]
-    for key in ("l", "lam", "a", "R", "r2_arcs", "r2_sine"):
+    for key in ("l", "lam", "a", "R", "R_up", "R_down", "r2_arcs", "r2_sine"):
         vals = [r[key] for r in live if r.get(key) is not None]
         summary[f"{key}_mean"] = float(np.mean(vals)) if vals else None
         summary[f"{key}_std"] = float(np.std(vals)) if vals else None

@@ -142,6 +142,23 @@ def status_cmd(
         write_table(directory)
 
 
+@study_app.command("table")
+def table_cmd(
+    directory: Annotated[Path, typer.Argument(help="study directory")],
+    out: Annotated[Path | None, typer.Option("--out", help="CSV file (default DIR/table.csv)")]
+    = None,
+) -> None:
+    """Write the study's table as CSV, one row per run: inputs, status, cost, mean metrics,
+    onset of buckling and per-rod lists (JSON) first, then every other recorded field."""
+    from undulate.study.storage import write_csv
+
+    if not (directory / "runs").is_dir():
+        _fail(f"{directory}: not a study directory (no runs/)")
+    if out is not None and out.is_dir():
+        _fail(f"--out {out}: is a folder; give a file name such as {out / 'table.csv'}")
+    _out.print(str(write_csv(directory, out)), highlight=False, soft_wrap=True)
+
+
 @study_app.command("figures")
 def figures_cmd(directory: Annotated[Path, typer.Argument(help="study directory")]) -> None:
     """Make the figures the study's data support (PNG + PDF in DIR/figures)."""

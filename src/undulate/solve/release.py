@@ -122,10 +122,12 @@ def imperfection_field(n: int, dx: float, amplitude: float, correlation: float,
 
 def _heights(sim: Simulation, x: np.ndarray) -> dict[str, float]:
     """Highest point of the rods' centre lines above their printed level (``max_height``, as
-    in metrics.json) and the largest deflection up or down (``max_deflection``)."""
+    in metrics.json), the largest deflection up or down (``max_deflection``) and the same per
+    rod (``rod_max_deflection``)."""
     z = [c[:, 2] - sim.section.offset for c in rod_centrelines(sim.mesh.rods, x, sim.section)]
     return dict(max_height=float(max(np.max(zi) for zi in z)),
-                max_deflection=float(max(np.max(np.abs(zi)) for zi in z)))
+                max_deflection=float(max(np.max(np.abs(zi)) for zi in z)),
+                rod_max_deflection=[float(np.max(np.abs(zi))) for zi in z])
 
 
 def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:

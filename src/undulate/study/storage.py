@@ -42,6 +42,8 @@ __all__ = [
     "write_study",
     "collect",
     "write_table",
+    "write_csv",
+    "CSV_COLUMNS",
     "PARAM_ALIASES",
     "default_mode",
 ]
@@ -225,6 +227,33 @@ def _arrow_safe(df: pd.DataFrame) -> pd.DataFrame:
 
 def _isnan(v: Any) -> bool:
     return isinstance(v, float) and math.isnan(v)
+
+
+#: the leading columns of a study's CSV table, in this order (per-rod lists as JSON strings);
+#: every other column of :func:`collect` follows them
+CSV_COLUMNS: tuple[str, ...] = (
+    "run_id", "status", "seed", "h", "s", "eps0", "N", "L", "b", "margin_y", "family", "n",
+    "l_mean", "l_std", "lam_mean", "a_mean", "R_mean", "R_up_mean", "R_down_mean",
+    "r2_arcs_mean", "r2_sine_mean", "onset_release_strain", "onset_height_release_strain",
+    "wall_time_s", "newton_iterations", "rods_n", "rods_l", "rods_a",
+    "rods_onset_release_strain",
+)
+
+
+def write_csv(study_dir: Path, path: Path | None = None) -> Path:
+    """Write the study's table as CSV (default ``DIR/table.csv``; atomically), one row per run:
+    :data:`CSV_COLUMNS` first (empty where a record lacks one, e.g. a failed run), then the
+    rest of :func:`collect`'s columns."""
+    study_dir = Path(study_dir)
+    df = collect(study_dir)
+    for col in CSV_COLUMNS:
+        if col not in df.columns:
+            df[col] = None
+    df = df[list(CSV_COLUMNS) + [c for c in df.columns if c not in CSV_COLUMNS]]
+    path = Path(path) if path is not None else study_dir / "table.csv"
+    with atomic_path(path) as tmp:
+        df.to_csv(tmp, index=False)
+    return path
 
 
 def write_table(study_dir: Path, df: pd.DataFrame | None = None) -> Path:
