@@ -147,6 +147,12 @@ class Release(_Strict):
     min_step_fraction: float = Field(
         1e-3, gt=0.0, le=1.0, description="smallest increment as a fraction of the nominal one"
     )
+    max_step_factor: float = Field(
+        4.0, ge=1.0, le=100.0,
+        description="largest increment as a multiple of the nominal one: once the rods have "
+        "buckled, a step that converged in a few Newton iterations without negative "
+        "curvature doubles the next increment, up to this (1: equal increments)",
+    )
 
 
 class Imperfection(_Strict):

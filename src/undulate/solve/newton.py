@@ -85,6 +85,9 @@ class NewtonResult:
     trace: list = field(default_factory=list)
 
 
+LOOSE_ITER = 8
+
+
 def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                   rng: np.random.Generator, x0: np.ndarray | None, tau: float = 1e-4,
                   k: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +113,7 @@ def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)),
                          matmat=lambda R: K_solve(np.asarray(R)), dtype=float)
     mu, V = np.array([np.nan]), X[:, :1]
-    for tol, maxiter in ((1e-4, 20), (min(1e-4, 1e-2 * tau), 60)):
+    for tol, maxiter in ((1e-4, LOOSE_ITER), (min(1e-4, 1e-2 * tau), 60)):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
@@ -183,8 +186,9 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             break
         t0 = time.perf_counter()
         v = None
+        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
         if n_neg == 0:
-            d = _refined_solve(solver, asm.symmetric(H), -g)
+            d = _refined_solve(solver, Hs, -g)
         else:
             tau = _shift_until_definite(asm, solver, H, tau, res)
             S = _jacobi_scale(H)
@@ -193,7 +197,7 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             if opts.negative_curvature:
                 t1 = time.perf_counter()
                 k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
-                mus, V = _lowest_modes(asm.symmetric(H), S, solver.solve, u.size, rng, v_prev,
+                mus, V = _lowest_modes(Hs, S, solver.solve, u.size, rng, v_prev,
                                        tau, k)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
@@ -216,7 +220,7 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             tau = max(tau / 10.0, 1e-8)
         t0 = time.perf_counter()
         E_ref = max(recent) if (opts.nonmonotone and v is None) else E
-        x_new, E_new, alpha, curved = _line_search(asm, x_fixed, u, d, v, g, E, H, E_ref)
+        x_new, E_new, alpha, curved = _line_search(asm, x_fixed, u, d, v, g, E, Hs, E_ref)
         times["line_search"] += time.perf_counter() - t0
         trace.append((res, n_neg, "curved" if curved else ("newton" if n_neg == 0 else
                                                             "shifted"), alpha, E))
@@ -300,7 +304,7 @@ def _refined_solve(solver, Hs: sp.csr_matrix, b: np.ndarray, sweeps: int = 2) ->
     return d
 
 
-def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H, E_ref: float | None = None
+def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, Hs, E_ref: float | None = None
                  ) -> tuple:
     """Backtracking on x(a) = u + a^2 d + a v (or u + a d when v is None); expand along v.
 
@@ -326,7 +330,7 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, E0, H, E_ref: float | None 
                 return x, E, a, False
             a *= 0.5
         return None, E0, 0.0, False
-    Hs_v = asm.symmetric(H) @ v
+    Hs_v = Hs @ v
     curv = float(v @ Hs_v)
 
     def model(a: float) -> float:

@@ -224,6 +224,27 @@ def _affine_predictor(x: np.ndarray, e_old: float, e_new: float, on_rod: np.ndar
     return x_pred
 
 
+#: a release step that converged in at most this many Newton iterations, none of them along
+#: negative curvature, lets the next increment grow
+EASY_STEP_ITERATIONS = 5
+#: deflection (in rod thicknesses) above which the rods count as buckled without a bifurcation
+BUCKLED_DEFLECTION = 2.0
+
+
+def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, res) -> float:
+    """The next release increment after a converged step of size ``de``.
+
+    Before the rods have buckled (no negative-curvature step yet) and after every step that
+    needed negative curvature or more than :data:`EASY_STEP_ITERATIONS` iterations, the
+    increment goes back towards the nominal one (a cut increment doubles back to it): the
+    onset and the changes of pattern are taken at the nominal resolution. On the smooth
+    post-buckling branch an easy step doubles the increment, up to ``max_factor`` x nominal.
+    """
+    if buckled and res.negative_steps == 0 and res.iterations <= EASY_STEP_ITERATIONS:
+        return min(2.0 * de, max_factor * de_nom)
+    return min(2.0 * de, de_nom) if de < de_nom else de_nom
+
+
 def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
                          progress: ProgressFn | None) -> tuple[np.ndarray, list[dict], dict]:
     rel = sim.case.release
@@ -243,6 +264,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         on_rod[rn] = True
     # equilibrium with the imperfection at the start (clamps still at eps0)
     steps = [(e, e)]
+    buckled = False
     x_prev = None
     e_prev = None
     while True:
@@ -297,7 +319,12 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
             progress((eps0 - e) / eps0, rec)
         if e <= 0.0:
             break
-        de = min(2.0 * de, de_nom)
+        # buckled: a step needed negative curvature (a bifurcation), or the rods stand out of
+        # the plane by more than twice their thickness (an imperfect, smooth onset; the curl
+        # of the bilayer before buckling is a fraction of h)
+        buckled = (buckled or res.negative_steps > 0
+                   or rec["max_deflection"] > BUCKLED_DEFLECTION * sim.section.h)
+        de = _next_increment(de, de_nom, rel.max_step_factor, buckled, res)
     totals["release_steps"] = len(history) - 1
     totals["converged"] = True
     totals["linear_solver"] = solver.name
