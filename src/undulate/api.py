@@ -37,7 +37,7 @@ __all__ = [
 
 DEMO = {
     "name": "demo",
-    # the default sheet (100 mm of fabric beside the rod, unstructured graded mesh): wide
+    # the default sheet (200 mm of fabric beside the rod, unstructured graded mesh): wide
     # enough for the study's waves (on a 20 mm strip this rod lifts the whole strip into one
     # arch; see docs/model.md, "Fabric width")
     "rods": {"h": 0.3, "L": 100.0},
