@@ -35,7 +35,10 @@ def _run(preset: str, out: Path) -> pd.DataFrame:
 def test_quick_single_rod_h(tmp_path: Path) -> None:
     df = _run("single-rod-h", tmp_path).sort_values("h")
     n = df["n"].to_numpy()
-    assert (n >= 1).all() and (n % 2 == 1).all()  # odd numbers of half-waves
+    # fewer half-waves for thicker rods. Not only odd numbers: on the physical sheet (200 mm
+    # beside the rod) the change from three half-waves to one passes through n = 2 (measured
+    # here at h = 0.3: n = 3, 2, 1 for h = 0.2, 0.3, 0.4; docs/model.md, "Fabric width")
+    assert (n >= 1).all() and (np.diff(n) <= 0).all(), n
     # thick rods: one half-wave spanning the rod; the 0.2 mm rod still forms several
     thick = df[df["h"] >= 1.0]
     assert (thick["n"] == 1).all()
