@@ -4,18 +4,13 @@ smooth post-buckling branch (``release.max_step_factor``)."""
 from types import SimpleNamespace
 
 import pytest
+from test_engine import SMALL as _SMALL  # tests/ is on sys.path under pytest
 
 from undulate import api
 from undulate.model import case_from_dict
 from undulate.solve.release import EASY_STEP_ITERATIONS, _next_increment
 
-SMALL = {
-    "name": "small",
-    "rods": {"h": 0.2, "L": 40.0},
-    "fabric": {"margin_x": 10.0, "margin_y": 10.0},
-    "release": {"eps0": 0.5, "steps": 20},
-    "mesh": {"dx_rod": 1.0, "dx_far": 4.0, "dy_far": 5.0},
-}
+SMALL = {**_SMALL, "release": {**_SMALL["release"], "steps": 20}}
 
 
 def _res(iterations: int, negative_steps: int = 0) -> SimpleNamespace:
