@@ -234,15 +234,14 @@ BUCKLED_DEFLECTION = 2.0
 def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, res) -> float:
     """The next release increment after a converged step of size ``de``.
 
-    Before the rods have buckled (no negative-curvature step yet) and after every step that
-    needed negative curvature or more than :data:`EASY_STEP_ITERATIONS` iterations, the
-    increment goes back towards the nominal one (a cut increment doubles back to it): the
+    Before the rods have buckled (``buckled``: decided by the release loop) and after every
+    step that needed negative curvature or more than :data:`EASY_STEP_ITERATIONS` iterations,
+    the increment goes back towards the nominal one (a cut increment doubles back to it): the
     onset and the changes of pattern are taken at the nominal resolution. On the smooth
     post-buckling branch an easy step doubles the increment, up to ``max_factor`` x nominal.
     """
-    if buckled and res.negative_steps == 0 and res.iterations <= EASY_STEP_ITERATIONS:
-        return min(2.0 * de, max_factor * de_nom)
-    return min(2.0 * de, de_nom) if de < de_nom else de_nom
+    easy = res.negative_steps == 0 and res.iterations <= EASY_STEP_ITERATIONS
+    return min(2.0 * de, (max_factor if buckled and easy else 1.0) * de_nom)
 
 
 def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
