@@ -64,6 +64,20 @@ def test_strain_form_kernels_are_exact(fn, nb, params):
     err_lin = float(jnp.max(jnp.abs(s_lin - s_new)))
     err_old = float(jnp.max(jnp.abs(s - s_new)))
     assert err_lin <= 1e-2 * err_old
+    # the mixed merit of a step: the energy at x + dx less k (e - e_lin)^2 / 2, so it equals the
+    # energy for dx = 0 and falls short of it by a fourth-order amount (dx doubled: x 16)
+    m0 = k["merit_step"](jnp.asarray(x), nodes, *P, jnp.zeros_like(jnp.asarray(x)))
+    assert float(m0[0, 0]) == pytest.approx(float(E[0]), rel=1e-12)
+    assert float(m0[0, 1]) == pytest.approx(float(E[0]), rel=1e-12)
+    gaps = []
+    for f in (1.0, 2.0):
+        dxf = jnp.asarray(1e2 * f * dx)
+        m = k["merit_step"](jnp.asarray(x), nodes, *P, dxf)
+        E1 = float(k["per_element"](jnp.asarray(x) + dxf, nodes, *P)[0])
+        assert float(m[0, 1]) == pytest.approx(E1, rel=1e-12)
+        gaps.append(E1 - float(m[0, 0]))
+    assert gaps[0] > 0.0
+    assert gaps[1] / gaps[0] == pytest.approx(16.0, rel=0.2)
 
 
 def test_mixed_newton_reaches_the_same_elastica():
@@ -88,13 +102,14 @@ def test_mixed_newton_reaches_the_same_elastica():
     start[:, 0] *= 0.8
     start[:, 2] = 1.0 * np.sin(np.pi * x0[:, 0] / L)
     out = {}
-    for mixed in (False, True):
-        opts = NewtonOptions(rtol=1e-8, force_scale=1.0, mixed=mixed, max_iter=300)
+    for mixed, merit in ((False, False), (True, False), (True, True)):
+        opts = NewtonOptions(rtol=1e-8, force_scale=1.0, mixed=mixed, mixed_merit=merit,
+                             max_iter=300)
         res = minimize(asm, start, asm.free(start), opts)
         assert res.converged, res.message
-        out[mixed] = res
-    x_plain = asm.full(out[False].u, start)
-    x_mixed = asm.full(out[True].u, start)
-    np.testing.assert_allclose(x_mixed, x_plain, atol=1e-6)
-    assert out[True].energy == pytest.approx(out[False].energy, rel=1e-9)
-    assert out[True].n_negative == 0
+        out[mixed, merit] = res
+    x_plain = asm.full(out[False, False].u, start)
+    for key in ((True, False), (True, True)):
+        np.testing.assert_allclose(asm.full(out[key].u, start), x_plain, atol=1e-6)
+        assert out[key].energy == pytest.approx(out[False, False].energy, rel=1e-9)
+        assert out[key].n_negative == 0

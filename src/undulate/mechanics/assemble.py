@@ -280,6 +280,20 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
         e, de = jax.jvp(e_of, (xl,), (dxl,))
         return sf.moduli(*p) * (e + de)
 
+    def merit_step_one(xl, *args):
+        # at xl + dxl: the energy, and the mixed merit s e - s^2 / (2 k) with s = k e_lin the
+        # stress of the strains linearized at xl (= the energy less k (e - e_lin)^2 / 2)
+        p, dxl = args[:-1], args[-1]
+
+        def e_of(y):
+            return sf.resid(jax.vmap(bf)(split(y)).ravel(), *p)
+
+        e0, de = jax.jvp(e_of, (xl,), (dxl,))
+        e1 = e_of(xl + dxl)
+        k = sf.moduli(*p)
+        e_lin = e0 + de
+        return jnp.stack([jnp.sum(k * e_lin * (e1 - 0.5 * e_lin)), 0.5 * jnp.sum(k * e1 * e1)])
+
     return {
         "per_element": jax.vmap(energy),
         "grad": jax.vmap(grad_one),
@@ -287,6 +301,7 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
         "grad_hess_mixed": jax.vmap(grad_hess_mixed_one),
         "stress": jax.vmap(stress_one),
         "stress_lin": jax.vmap(stress_lin_one),
+        "merit_step": jax.vmap(merit_step_one),
     }
 
 
@@ -315,7 +330,7 @@ def kernels_for(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
             batched = custom() if callable(custom) else _group_kernels(fn)
         label = _disk_label(fn)
         _KERNEL_CACHE[fn] = {
-            name: _with_gather(k, gather_last=(name == "stress_lin"),
+            name: _with_gather(k, gather_last=name in ("stress_lin", "merit_step"),
                                label=f"{label}.{name}" if label else None)
             for name, k in batched.items()
         }
@@ -510,6 +525,31 @@ class Assembly:
         return {i: np.concatenate([np.asarray(o) for o in
                                    self.groups[i].run("stress_lin", xj, dj)])
                 [: self.groups[i].n_el] for i in self.mixed_groups}
+
+    def merit(self, x: np.ndarray, dx: np.ndarray) -> tuple[float, float]:
+        """(merit, energy) at ``x + dx``: the merit of a mixed Newton step from ``x``.
+
+        The merit is the energy with each strain-form group's quadratic term evaluated as the
+        Hellinger-Reissner functional ``s e - s^2 / (2 k)`` at the stress ``s = k e_lin`` of
+        the strains linearized at ``x`` (the stress a mixed Newton step carries), i.e. the
+        energy less ``k (e - e_lin)^2 / 2``: the second-order stretch that a straight step
+        gives a rotating stiff rod is not charged to the step (the next iteration removes it).
+        """
+        xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
+        x1 = jnp.asarray(np.asarray(x) + np.asarray(dx))
+        mixed = set(self.mixed_groups)
+        merit = energy = 0.0
+        for i, g in enumerate(self.groups):
+            if i in mixed:
+                me = np.concatenate([np.asarray(o) for o in g.run("merit_step", xj, dj)])
+                me = me[: g.n_el].sum(axis=0)
+                merit += float(me[0])
+                energy += float(me[1])
+            else:
+                e = float(self._per_element(g, x1).sum())
+                merit += e
+                energy += e
+        return merit, energy
 
     @staticmethod
     def symmetric(H_upper: sp.csc_matrix) -> sp.csr_matrix:
