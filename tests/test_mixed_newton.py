@@ -110,6 +110,12 @@ def test_mixed_newton_reaches_the_same_elastica():
         out[mixed, merit] = res
     x_plain = asm.full(out[False, False].u, start)
     for key in ((True, False), (True, True)):
-        np.testing.assert_allclose(asm.full(out[key].u, start), x_plain, atol=1e-6)
+        # the start is far from equilibrium (ends pushed in by 20 % with a 1 mm bump): a
+        # solver may end on the mirror image z -> -z of the same elastica
+        x_key = asm.full(out[key].u, start)
+        mid = chain.p[n // 2]
+        if x_key[mid, 2] * x_plain[mid, 2] < 0:
+            x_key = x_key * np.array([1.0, 1.0, -1.0])
+        np.testing.assert_allclose(x_key, x_plain, atol=1e-6)
         assert out[key].energy == pytest.approx(out[False, False].energy, rel=1e-9)
         assert out[key].n_negative == 0

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import eigh
 from scipy.sparse.linalg import LinearOperator, lobpcg
 
 from ..mechanics.assemble import Assembly
@@ -102,11 +103,47 @@ class NewtonResult:
 
 
 LOOSE_ITER = 8
+#: sweeps of the inverse iteration that replaces LOBPCG's tight pass
+INVERSE_ITER = 12
+
+
+def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
+                       rng: np.random.Generator, iters: int = INVERSE_ITER
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenpairs of H v = mu S v nearest zero by block inverse iteration on H's own (indefinite)
+    factorization, with a Rayleigh-Ritz step per sweep; returns (mu, V), lowest first.
+
+    The modes LOBPCG's loose pass cannot resolve are the ones barely below zero, met just past
+    a bifurcation and at the end of a snap: nearest zero, they are the ones inverse iteration
+    finds first, and fast (rate |mu_1 / mu_2| per sweep).
+    """
+    n = H.shape[0]
+    X = np.column_stack([X, rng.standard_normal((n, max(3 - X.shape[1], 1)))])
+    mu = np.array([np.nan])
+    V = X[:, :1]
+    for _ in range(iters):
+        Y = H_solve(S[:, None] * X)
+        Y = Y.reshape(n, -1)
+        if not np.all(np.isfinite(Y)):
+            return np.array([np.nan]), V
+        Y, _ = np.linalg.qr(Y)
+        A = Y.T @ (H @ Y)
+        B = Y.T @ (S[:, None] * Y)
+        try:
+            w, Z = eigh(0.5 * (A + A.T), 0.5 * (B + B.T))
+        except np.linalg.LinAlgError:
+            return np.array([np.nan]), V
+        X = Y @ Z
+        converged = abs(w[0] - mu[0]) <= 1e-3 * abs(w[0]) if np.isfinite(mu[0]) else False
+        mu, V = w, X
+        if converged:
+            break
+    return mu, V
 
 
 def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                   rng: np.random.Generator, x0: np.ndarray | None, tau: float = 1e-4,
-                  k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                  k: int = 1, H_solve=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of H v = mu S v (S diagonal), preconditioned by
     K^-1 = (H + tau S)^-1; returns (mu (k,), V (n, k)), lowest first.
 
@@ -130,6 +167,12 @@ def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                          matmat=lambda R: K_solve(np.asarray(R)), dtype=float)
     mu, V = np.array([np.nan]), X[:, :1]
     for tol, maxiter in ((1e-4, LOOSE_ITER), (min(1e-4, 1e-2 * tau), 60)):
+        if maxiter != LOOSE_ITER and H_solve is not None:
+            # the tight pass: inverse iteration on H when its factorization is at hand
+            # (measured on the demo: 14 tight LOBPCG passes of 49 iterations, 137 ms each)
+            mu_i, V_i = _inverse_iteration(H, S, H_solve, X, rng)
+            if np.isfinite(mu_i[0]) and mu_i[0] < 0:
+                return mu_i, V_i
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
@@ -188,10 +231,12 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             g, H = asm.gradient_hessian(x)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
+        H_factored = True
         try:
             n_neg = solver.factor(H)
         except SingularMatrixError:
             n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
+            H_factored = False
         times["factor"] += time.perf_counter() - t0
         if not np.isfinite(res):
             break
@@ -206,15 +251,18 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         if n_neg == 0:
             d = _refined_solve(solver, Hs, -g)
         else:
-            tau = _shift_until_definite(asm, solver, H, tau, res)
+            # the shifted matrix is factored by a twin solver: H's own (indefinite)
+            # factorization stays at hand for the inverse iteration of _lowest_modes
+            shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
+            tau = _shift_until_definite(asm, shift_solver, H, tau, res)
             S = _jacobi_scale(H)
             times["factor"] += time.perf_counter() - t0
-            d = -solver.solve(g)
+            d = -shift_solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
                 k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
-                mus, V = _lowest_modes(Hs, S, solver.solve, u.size, rng, v_prev,
-                                       tau, k)
+                mus, V = _lowest_modes(Hs, S, shift_solver.solve, u.size, rng, v_prev,
+                                       tau, k, solver.solve if H_factored else None)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
@@ -261,6 +309,15 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         recent.append(E)
     return result(False, it, f"no stable equilibrium after {it} iterations: max|g| = "
                              f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+
+
+def _twin(solver, kind: str):
+    """A second solver of the same kind, kept on ``solver`` (its analysis is reused)."""
+    twin = getattr(solver, "shift_twin", None)
+    if twin is None:
+        twin = make_solver(kind)
+        solver.shift_twin = twin
+    return twin
 
 
 def _downhill_combination(mus: np.ndarray, V: np.ndarray, g: np.ndarray, S: np.ndarray,
