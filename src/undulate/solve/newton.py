@@ -105,10 +105,6 @@ class NewtonResult:
 LOOSE_ITER = 8
 #: sweeps of the inverse iteration that replaces LOBPCG's tight pass
 INVERSE_ITER = 12
-#: away from convergence, the tight eigen pass runs only when H + TIGHT_SHIFT |diag H| is not
-#: positive definite: a negative curvature above -1e-5 of the stiffness is not worth its cost
-#: (measured on five rods at s = 50: tight passes of 0.6 s each; the shifted Newton step does)
-TIGHT_SHIFT = 1e-5
 
 
 def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
@@ -147,8 +143,7 @@ def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
 
 def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                   rng: np.random.Generator, x0: np.ndarray | None, tau: float = 1e-4,
-                  k: int = 1, H_solve=None, tight: bool = True
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  k: int = 1, H_solve=None) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of H v = mu S v (S diagonal), preconditioned by
     K^-1 = (H + tau S)^-1; returns (mu (k,), V (n, k)), lowest first.
 
@@ -172,8 +167,6 @@ def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                          matmat=lambda R: K_solve(np.asarray(R)), dtype=float)
     mu, V = np.array([np.nan]), X[:, :1]
     for tol, maxiter in ((1e-4, LOOSE_ITER), (min(1e-4, 1e-2 * tau), 60)):
-        if maxiter != LOOSE_ITER and not tight:
-            break
         if maxiter != LOOSE_ITER and H_solve is not None:
             # the tight pass: inverse iteration on H when its factorization is at hand
             # (measured on the demo: 14 tight LOBPCG passes of 49 iterations, 137 ms each)
@@ -261,27 +254,15 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
             shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
-            S = _jacobi_scale(H)
-            if res <= tol and opts.negative_curvature and \
-                    _definite(asm, shift_solver, H, opts.marginal * S):
-                # converged in force, and H + marginal S is positive definite: by Sylvester's
-                # law no eigenvalue of (H, S) lies below -marginal (one factorization, where
-                # the eigen solver's tight pass took 0.6 s on five rods)
-                times["factor"] += time.perf_counter() - t0
-                return result(True, it, f"marginally stable: no relative eigenvalue below "
-                                        f"-{opts.marginal:.0e} (inertia of H + "
-                                        f"{opts.marginal:.0e} |diag H|)")
             tau = _shift_until_definite(asm, shift_solver, H, tau, res)
+            S = _jacobi_scale(H)
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
                 k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
-                # the tight eigen pass only where it matters: for the stability verdict, or
-                # when the shift says the curvature may be worth following (below -1e-5)
-                tight = res <= tol or tau > TIGHT_SHIFT
                 mus, V = _lowest_modes(Hs, S, shift_solver.solve, u.size, rng, v_prev,
-                                       tau, k, solver.solve if H_factored else None, tight)
+                                       tau, k, solver.solve if H_factored else None)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
@@ -360,16 +341,6 @@ def _jacobi_scale(H: sp.csc_matrix) -> np.ndarray:
     """S = |diag H| (floored): each unknown's own stiffness, the metric of shifts and modes."""
     S = np.abs(H.diagonal())
     return np.maximum(S, 1e-12 * max(S.max(), 1e-300))
-
-
-def _definite(asm: Assembly, solver, H: sp.csc_matrix, shift: np.ndarray) -> bool:
-    """Whether H + diag(shift) is positive definite (factored by ``solver``)."""
-    K = H.copy()
-    K.data[asm.diag_pos] += shift
-    try:
-        return solver.factor(K) == 0
-    except SingularMatrixError:
-        return False
 
 
 def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, tau: float,
