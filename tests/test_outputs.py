@@ -72,7 +72,9 @@ def test_interrupted_run_leaves_no_complete_looking_result(tmp_path: Path, sig) 
     staging = [p for p in tmp_path.iterdir() if p.name.startswith(".run1.incomplete-")]
     assert len(staging) == 1 and (staging[0] / "metrics.json").is_file()
     proc.send_signal(sig)
-    proc.wait(timeout=60)
+    # communicate, not wait: the run keeps writing to its stdout pipe while it stops (an
+    # undrained pipe can block it; this test once timed out after 60 s in a full CI run)
+    proc.communicate(timeout=120)
     assert not out.exists()
     left = [p for p in tmp_path.iterdir() if p.name.startswith(".run1.incomplete-")]
     if sig == signal.SIGINT:
