@@ -24,7 +24,11 @@ ROOT = Path(__file__).parents[1]
 # Runs the CLI in a child process whose output writer stops after the centre lines and
 # metrics.json are written, announces it, and waits to be killed.
 _PAUSING_RUN = """
-import sys, time
+import faulthandler, signal, sys, time
+faulthandler.register(signal.SIGUSR1, all_threads=True)
+# Ctrl-C as in a terminal, also when this test runs in a background job (which starts its
+# children with SIGINT ignored: the run then slept through the signal, measured)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 import undulate.interfaces.output as o
 real = o._write_vtu
 def pause(*a, **k):
@@ -72,9 +76,15 @@ def test_interrupted_run_leaves_no_complete_looking_result(tmp_path: Path, sig) 
     staging = [p for p in tmp_path.iterdir() if p.name.startswith(".run1.incomplete-")]
     assert len(staging) == 1 and (staging[0] / "metrics.json").is_file()
     proc.send_signal(sig)
-    # communicate, not wait: the run keeps writing to its stdout pipe while it stops (an
-    # undrained pipe can block it; this test once timed out after 60 s in a full CI run)
-    proc.communicate(timeout=120)
+    # communicate, not wait: the run may still write to its stdout pipe while it stops
+    try:
+        proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)  # the child's stacks, to say where it hangs
+        time.sleep(2)
+        proc.kill()
+        out_text, _ = proc.communicate()
+        raise AssertionError("the run did not stop after the signal:\n" + out_text) from None
     assert not out.exists()
     left = [p for p in tmp_path.iterdir() if p.name.startswith(".run1.incomplete-")]
     if sig == signal.SIGINT:
