@@ -228,9 +228,11 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
     def split(xl):
         return xl.reshape(nb, -1)
 
+    def strains(xl, p):
+        return sf.resid(jax.vmap(bf)(split(xl)).ravel(), *p)
+
     def energy(xl, *p):
-        q = jax.vmap(bf)(split(xl)).ravel()
-        e = sf.resid(q, *p)
+        e = strains(xl, p)
         return 0.5 * jnp.sum(sf.moduli(*p) * e * e)
 
     def parts(xl, *p):
@@ -268,30 +270,23 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
         return grad_hess_with(xl, args[:-1], args[-1])
 
     def stress_one(xl, *p):
-        q = jax.vmap(bf)(split(xl)).ravel()
-        return sf.moduli(*p) * sf.resid(q, *p)
+        return sf.moduli(*p) * strains(xl, p)
+
+    def linearized_strains(xl, p, dxl):
+        e, de = jax.jvp(lambda y: strains(y, p), (xl,), (dxl,))
+        return e + de
 
     def stress_lin_one(xl, *args):
         p, dxl = args[:-1], args[-1]
-
-        def e_of(y):
-            return sf.resid(jax.vmap(bf)(split(y)).ravel(), *p)
-
-        e, de = jax.jvp(e_of, (xl,), (dxl,))
-        return sf.moduli(*p) * (e + de)
+        return sf.moduli(*p) * linearized_strains(xl, p, dxl)
 
     def merit_step_one(xl, *args):
         # at xl + dxl: the energy, and the mixed merit s e - s^2 / (2 k) with s = k e_lin the
         # stress of the strains linearized at xl (= the energy less k (e - e_lin)^2 / 2)
         p, dxl = args[:-1], args[-1]
-
-        def e_of(y):
-            return sf.resid(jax.vmap(bf)(split(y)).ravel(), *p)
-
-        e0, de = jax.jvp(e_of, (xl,), (dxl,))
-        e1 = e_of(xl + dxl)
+        e_lin = linearized_strains(xl, p, dxl)
+        e1 = strains(xl + dxl, p)
         k = sf.moduli(*p)
-        e_lin = e0 + de
         return jnp.stack([jnp.sum(k * e_lin * (e1 - 0.5 * e_lin)), 0.5 * jnp.sum(k * e1 * e1)])
 
     return {

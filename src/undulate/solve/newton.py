@@ -123,7 +123,6 @@ def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
     V = X[:, :1]
     for _ in range(iters):
         Y = H_solve(S[:, None] * X)
-        Y = Y.reshape(n, -1)
         if not np.all(np.isfinite(Y)):
             return np.array([np.nan]), V
         Y, _ = np.linalg.qr(Y)
@@ -286,8 +285,8 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         # the merit of a step from x starts at E (x is its own linearization point)
         merit = _merit_function(asm, x, opts, recent) if mixed else _energy_function(asm)
         E_ref = max(recent) if (opts.nonmonotone and v is None) else E
-        x_new, _, E_new, alpha, curved = _line_search(asm, x_fixed, u, d, v, g, E, Hs, merit,
-                                                      E_ref)
+        x_new, E_new, alpha, curved = _line_search(asm, x_fixed, u, d, v, g, E, Hs, merit,
+                                                   E_ref)
         times["line_search"] += time.perf_counter() - t0
         trace.append((res, n_neg, "curved" if curved else ("newton" if n_neg == 0 else
                                                             "shifted"), alpha, E))
@@ -414,14 +413,14 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, M0, Hs, merit,
 
     ``merit(x)`` returns (merit, energy) of a trial point; ``M0`` is the current merit and
     ``M_ref`` the one a Newton step must beat (the highest recent one: non-monotone).
-    Returns (x, merit, energy, step length a, curved) with x None when no step lowers the
-    merit. Near convergence the merit change of a Newton step falls below its roundoff; then
-    the step is accepted when it lowers max|g| instead (the merit cannot tell).
+    Returns (x, energy, step length a, curved) with x None when no step lowers the merit.
+    Near convergence the merit change of a Newton step falls below its roundoff; then the step
+    is accepted when it lowers max|g| instead (the merit cannot tell).
     """
     slope = float(g @ d)
     if v is None:
         if slope >= 0:
-            return None, M0, M0, 0.0, False
+            return None, M0, 0.0, False
         noise = 1e-13 * abs(M0)
         res0 = float(np.max(np.abs(g)))
         M_acc = M0 if M_ref is None else max(M0, M_ref)
@@ -430,12 +429,12 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, M0, Hs, merit,
             x = asm.full(u + a * d, x_fixed)
             M, E = merit(x)
             if np.isfinite(M) and M <= M_acc + 1e-4 * a * slope:
-                return x, M, E, a, False
+                return x, E, a, False
             if np.isfinite(M) and -a * slope <= 100 * noise and abs(M - M0) <= 100 * noise \
                     and float(np.max(np.abs(asm.gradient(x)))) < res0:
-                return x, M, E, a, False
+                return x, E, a, False
             a *= 0.5
-        return None, M0, M0, 0.0, False
+        return None, M0, 0.0, False
     Hs_v = Hs @ v
     curv = float(v @ Hs_v)
 
@@ -455,7 +454,7 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, M0, Hs, merit,
             break
         a *= 0.5
     if best is None:
-        return None, M0, M0, 0.0, False
+        return None, M0, 0.0, False
     # expand while the merit keeps decreasing (escape from the saddle in one go)
     x_b, M_b, E_b, a_b = best
     if a_b == 1.0:
@@ -467,4 +466,4 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, M0, Hs, merit,
                 break
             x_b, M_b, E_b, a_b = x, M, E, a
             a *= 2.0
-    return x_b, M_b, E_b, a_b, True
+    return x_b, E_b, a_b, True
