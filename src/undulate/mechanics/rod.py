@@ -30,8 +30,9 @@ Every strain is measured against its value at printing (stress-free printing); e
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
-from .assemble import StrainForm
+from .assemble import StrainForm, StrainTerm
 
 
 def _unit(v: jnp.ndarray) -> jnp.ndarray:
@@ -67,26 +68,30 @@ def edge_length(x10: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
     return _edge_length_q(jnp.concatenate([frame_point(x10[:5]), frame_point(x10[5:])]), d)
 
 
-def _vertex_strains_q(q: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
-    Xa, wa = q[0:3] + d * q[3:6], q[6:9]
-    Xb, wb = q[9:12] + d * q[12:15], q[15:18]
-    Xc, wc = q[18:21] + d * q[21:24], q[24:27]
-    T0 = _unit(Xb - Xa)
-    T1 = _unit(Xc - Xb)
-    u0 = wa + wb
-    u1 = wb + wc
+def _bend_strains(e0: jnp.ndarray, e1: jnp.ndarray, u0: jnp.ndarray, u1: jnp.ndarray
+                  ) -> jnp.ndarray:
+    """(kappa_out, kappa_in) at a vertex from its edge vectors e0, e1 and the sums u0, u1 of the
+    width vectors at each edge's ends."""
+    T0 = _unit(e0)
+    T1 = _unit(e1)
     W0 = _unit(u0 - jnp.dot(u0, T0) * T0)
     W1 = _unit(u1 - jnp.dot(u1, T1) * T1)
     N0 = jnp.cross(T0, W0)
     N1 = jnp.cross(T1, W1)
     kb = 2.0 * jnp.cross(T0, T1) / (1.0 + jnp.dot(T0, T1))
-    k_out = 0.5 * jnp.dot(kb, W0 + W1)
-    k_in = 0.5 * jnp.dot(kb, N0 + N1)
+    return jnp.stack([0.5 * jnp.dot(kb, W0 + W1), 0.5 * jnp.dot(kb, N0 + N1)])
+
+
+def _vertex_strains_q(q: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
+    Xa, wa = q[0:3] + d * q[3:6], q[6:9]
+    Xb, wb = q[9:12] + d * q[12:15], q[15:18]
+    Xc, wc = q[18:21] + d * q[21:24], q[24:27]
+    k = _bend_strains(Xb - Xa, Xc - Xb, wa + wb, wb + wc)
     # twist of each edge from the nodes' own width directions (not averaged: an average
     # would not see a zig-zag rotation of the cross-sections, a spurious zero-energy mode)
-    ta = _edge_twist(wa, wb, T0)
-    tb = _edge_twist(wb, wc, T1)
-    return jnp.stack([k_out, k_in, ta, tb])
+    ta = _edge_twist(wa, wb, _unit(Xb - Xa))
+    tb = _edge_twist(wb, wc, _unit(Xc - Xb))
+    return jnp.stack([k[0], k[1], ta, tb])
 
 
 def _edge_twist(w0: jnp.ndarray, w1: jnp.ndarray, T: jnp.ndarray) -> jnp.ndarray:
@@ -144,24 +149,81 @@ def rod_bend_twist(x15: jnp.ndarray, d: jnp.ndarray, rest: jnp.ndarray, lv: jnp.
 # Strain forms (energy = 0.5 sum k e^2 of strains through the per-node frame): the assembly
 # builds the kernels by the chain rule (cheap to compile), and the Newton solver may carry the
 # stresses k e of these stiff strains itself (mixed Newton, see undulate.solve.newton).
-def _stretch_resid(q, d, L0, EA):
-    return jnp.reshape(_edge_length_q(q, d) / L0 - 1.0, (1,))
-
-
 def _stretch_moduli(d, L0, EA):
     return jnp.reshape(EA * L0, (1,))
-
-
-def _bend_twist_resid(q, d, rest, lv, EI_out, EI_in, GJ):
-    return _vertex_strains_q(q, d) - rest
 
 
 def _bend_twist_moduli(d, rest, lv, EI_out, EI_in, GJ):
     return jnp.stack([EI_out, EI_in, 0.5 * GJ, 0.5 * GJ]) / lv
 
 
-rod_stretch.strain_form = StrainForm(frame_point, 2, _stretch_resid, _stretch_moduli)  # type: ignore[attr-defined]
-rod_bend_twist.strain_form = StrainForm(frame_point, 3, _bend_twist_resid, _bend_twist_moduli)  # type: ignore[attr-defined]
+# The strains as terms of few variables each (a StrainTerm: strains of a linear projection of
+# the frame points q = (p, n, w) per node, X = p + d n): their second derivatives are then
+# Hessians of 12 and 9 variables instead of 27 (docs/benchmarks.md, "Rod kernels").
+def _select(n_nodes: int, node: int, part: int) -> np.ndarray:
+    """(3, 9 n_nodes) matrix picking p (part 0), n (1) or w (2) of one node from q."""
+    m = np.zeros((3, 9 * n_nodes))
+    m[:, 9 * node + 3 * part : 9 * node + 3 * part + 3] = np.eye(3)
+    return m
+
+
+def _centre_maps(n_nodes: int) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """Per node: (P_p, P_n, P_w) with X = (P_p + d P_n) q and w = P_w q."""
+    return ([_select(n_nodes, i, 0) for i in range(n_nodes)],
+            [_select(n_nodes, i, 1) for i in range(n_nodes)],
+            [_select(n_nodes, i, 2) for i in range(n_nodes)])
+
+
+_P3, _N3, _W3 = _centre_maps(3)
+_BEND_A = np.concatenate([_P3[1] - _P3[0], _P3[2] - _P3[1], _W3[0] + _W3[1], _W3[1] + _W3[2]])
+_BEND_B = np.concatenate([_N3[1] - _N3[0], _N3[2] - _N3[1], 0 * _W3[0], 0 * _W3[0]])
+_TWIST_A = [np.concatenate([_W3[i], _W3[i + 1], _P3[i + 1] - _P3[i]]) for i in (0, 1)]
+_TWIST_B = [np.concatenate([0 * _W3[i], 0 * _W3[i], _N3[i + 1] - _N3[i]]) for i in (0, 1)]
+
+
+def _bend_project(d, *_):
+    """(e0, e1, u0, u1) = (X_b - X_a, X_c - X_b, w_a + w_b, w_b + w_c) from q."""
+    return jnp.asarray(_BEND_A) + d * jnp.asarray(_BEND_B)
+
+
+def _bend_term(z, d, rest, *_):
+    return _bend_strains(z[0:3], z[3:6], z[6:9], z[9:12]) - rest[0:2]
+
+
+def _twist_project(i: int):
+    def project(d, *_):
+        """(w_i, w_i+1, X_i+1 - X_i) of edge i from q."""
+        return jnp.asarray(_TWIST_A[i]) + d * jnp.asarray(_TWIST_B[i])
+    return project
+
+
+def _twist_term(i: int):
+    def strains(z, d, rest, *_):
+        return jnp.reshape(_edge_twist(z[0:3], z[3:6], _unit(z[6:9])) - rest[2 + i], (1,))
+    return strains
+
+
+_P2, _N2, _ = _centre_maps(2)
+_STRETCH_A = _P2[1] - _P2[0]
+_STRETCH_B = _N2[1] - _N2[0]
+
+
+def _stretch_project(d, *_):
+    """The edge vector X_1 - X_0 from q."""
+    return jnp.asarray(_STRETCH_A) + d * jnp.asarray(_STRETCH_B)
+
+
+def _stretch_term(z, d, L0, EA):
+    return jnp.reshape(jnp.linalg.norm(z) / L0 - 1.0, (1,))
+
+
+rod_stretch.strain_form = StrainForm(  # type: ignore[attr-defined]
+    frame_point, 2, None, _stretch_moduli, terms=(StrainTerm(_stretch_project, _stretch_term),))
+rod_bend_twist.strain_form = StrainForm(  # type: ignore[attr-defined]
+    frame_point, 3, None, _bend_twist_moduli,
+    terms=(StrainTerm(_bend_project, _bend_term),
+           StrainTerm(_twist_project(0), _twist_term(0)),
+           StrainTerm(_twist_project(1), _twist_term(1))))
 
 
 def rod_footprint(x5: jnp.ndarray, rest: jnp.ndarray, k: jnp.ndarray) -> jnp.ndarray:

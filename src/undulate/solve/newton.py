@@ -140,6 +140,47 @@ def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
     return mu, V
 
 
+def _lobpcg(H: sp.csr_matrix, S: np.ndarray, M, X: np.ndarray, maxiter: int,
+            rtol: float = 1e-2) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Lowest eigenpairs of H v = mu S v (S diagonal) by a small LOBPCG, preconditioned by M.
+
+    Rayleigh-Ritz on span[X, M R, P] each sweep (one block solve with M, a few sparse
+    products). It stops as soon as the lowest Ritz value is negative and has settled (relative
+    change <= ``rtol``): a curved step needs a direction of clearly negative curvature, not an
+    eigenvector to many digits. Returns (mu, V, settled), lowest first, V S-orthonormal.
+    """
+    k = X.shape[1]
+
+    def ritz(Z: np.ndarray, HZ: np.ndarray):
+        # Rayleigh-Ritz on span(Z), S-orthonormalized with its near-dependent part dropped
+        G = Z.T @ (S[:, None] * Z)
+        w, U = np.linalg.eigh(0.5 * (G + G.T))
+        keep = w > 1e-12 * max(w.max(), 1e-300)
+        T = U[:, keep] / np.sqrt(w[keep])
+        A = T.T @ (Z.T @ HZ) @ T
+        theta, C = np.linalg.eigh(0.5 * (A + A.T))
+        TC = T @ C[:, :k]
+        return theta[:k], Z @ TC, HZ @ TC
+
+    mu, X, HX = ritz(X, H @ X)
+    P = HP = None
+    for _ in range(maxiter):
+        R = HX - (S[:, None] * X) * mu
+        W = np.asarray(M(R)).reshape(X.shape[0], -1)
+        HW = H @ W
+        Z = np.column_stack([X, W] if P is None else [X, W, P])
+        HZ = np.column_stack([HX, HW] if P is None else [HX, HW, HP])
+        mu_new, Xn, HXn = ritz(Z, HZ)
+        settled = mu_new[0] < 0 and abs(mu_new[0] - mu[0]) <= rtol * abs(mu_new[0])
+        # the previous direction: what the new vectors add to the old ones
+        c = X.T @ (S[:, None] * Xn)
+        P, HP = Xn - X @ c, HXn - HX @ c
+        mu, X, HX = mu_new, Xn, HXn
+        if settled:
+            return mu, X, True
+    return mu, X, False
+
+
 def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
                   rng: np.random.Generator, x0: np.ndarray | None, tau: float = 1e-4,
                   k: int = 1, H_solve=None) -> tuple[np.ndarray, np.ndarray]:
@@ -149,41 +190,44 @@ def _lowest_modes(H: sp.csr_matrix, S: np.ndarray, K_solve, n: int,
     The start block is the previous iteration's modes ``x0`` (n,) or (n, j) when there are
     any, filled up with random vectors, and random otherwise: a warm start alone can lock onto a
     positive mode while a weaker negative one exists (measured on a thin rod: +4.5e-6 returned
-    while mu = -1.1e-5 existed). A cheap, loose pass comes first;
-    a tight one (residual tolerance following the shift tau, about the size of the most
-    negative mu: the eigenvalues that matter here can be 1e-5 of the stiffness) only when the
-    loose pass found no negative curvature.
+    while mu = -1.1e-5 existed). A cheap, loose pass comes first (:func:`_lobpcg`, stopped once
+    a negative Ritz value has settled); a tight one only when it found no negative curvature:
+    inverse iteration on H's own factorization when it is at hand, else SciPy's LOBPCG with a
+    residual tolerance following the shift tau (the eigenvalues that matter here can be 1e-5 of
+    the stiffness).
     """
     X = rng.standard_normal((n, max(k, 1)))
     if x0 is not None:
         # with a block, keep one random column: the warm modes alone may miss a new one
         x0 = x0.reshape(n, -1)[:, : max(X.shape[1] - 1, 1)]
         X[:, : x0.shape[1]] = x0
-    Sm = sp.diags(S)
-    # the preconditioner takes LOBPCG's whole block in one solve (PARDISO solves k right-hand
-    # sides at once; a matvec-only operator would solve them one by one)
+
+    def M(R: np.ndarray) -> np.ndarray:
+        # the preconditioner takes the whole block in one solve (PARDISO solves k right-hand
+        # sides at once)
+        return K_solve(R if R.shape[1] > 1 else R[:, 0])
+
+    mu, V, _ = _lobpcg(H, S, M, X, LOOSE_ITER)
+    if np.isfinite(mu[0]) and mu[0] < 0:
+        return mu, V
+    X = V if np.all(np.isfinite(V)) else X
+    if H_solve is not None:
+        # the tight pass: inverse iteration on H when its factorization is at hand
+        # (measured on the demo: 14 tight LOBPCG passes of 49 iterations, 137 ms each)
+        mu_i, V_i = _inverse_iteration(H, S, H_solve, X, rng)
+        if np.isfinite(mu_i[0]) and mu_i[0] < 0:
+            return mu_i, V_i
     Mop = LinearOperator((n, n), matvec=lambda r: K_solve(np.ravel(r)),
                          matmat=lambda R: K_solve(np.asarray(R)), dtype=float)
-    mu, V = np.array([np.nan]), X[:, :1]
-    for tol, maxiter in ((1e-4, LOOSE_ITER), (min(1e-4, 1e-2 * tau), 60)):
-        if maxiter != LOOSE_ITER and H_solve is not None:
-            # the tight pass: inverse iteration on H when its factorization is at hand
-            # (measured on the demo: 14 tight LOBPCG passes of 49 iterations, 137 ms each)
-            mu_i, V_i = _inverse_iteration(H, S, H_solve, X, rng)
-            if np.isfinite(mu_i[0]) and mu_i[0] < 0:
-                return mu_i, V_i
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
-                w, W = lobpcg(H, X, B=Sm, M=Mop, largest=False, tol=tol, maxiter=maxiter)
-        except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
-            continue
-        order = np.argsort(w)
-        mu, V = np.asarray(w)[order], np.asarray(W)[:, order]
-        if mu[0] < 0:
-            break
-        X = V
-    return mu, V
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "not reaching the requested tolerance"
+            w, W = lobpcg(H, X, B=sp.diags(S), M=Mop, largest=False,
+                          tol=min(1e-4, 1e-2 * tau), maxiter=60)
+    except Exception:  # pragma: no cover - LOBPCG can fail on tiny problems
+        return mu, V
+    order = np.argsort(w)
+    return np.asarray(w)[order], np.asarray(W)[:, order]
 
 
 def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
@@ -253,8 +297,9 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
             shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
-            tau = _shift_until_definite(asm, shift_solver, H, tau, res)
             S = _jacobi_scale(H)
+            tau = _shift_until_definite(asm, shift_solver, H, tau, res,
+                                        _ritz_floor(Hs, S, v_prev))
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
@@ -342,21 +387,41 @@ def _jacobi_scale(H: sp.csc_matrix) -> np.ndarray:
     return np.maximum(S, 1e-12 * max(S.max(), 1e-300))
 
 
+def _ritz_floor(Hs: sp.csr_matrix, S: np.ndarray, V: np.ndarray | None) -> float:
+    """The lowest Ritz value of (H, S) on span(V) (the last iteration's modes): an upper
+    bound of the lowest eigenvalue, so any shift tau <= -value cannot make H + tau S positive
+    definite. 0 when there are no modes or they show no negative curvature."""
+    if V is None or not np.all(np.isfinite(V)):
+        return 0.0
+    V = V.reshape(V.shape[0], -1)
+    A = V.T @ (Hs @ V)
+    B = V.T @ (S[:, None] * V)
+    try:
+        w = eigh(0.5 * (A + A.T), 0.5 * (B + B.T), eigvals_only=True)
+    except np.linalg.LinAlgError:
+        return 0.0
+    return float(min(w[0], 0.0))
+
+
 def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, tau: float,
-                          res: float) -> float:
+                          res: float, floor: float = 0.0) -> float:
     """Factor K = H + tau S with tau grown by 10 until K is positive definite; return tau.
 
-    K keeps H's pattern, so the symbolic factorization is reused.
+    K keeps H's pattern, so the symbolic factorization is reused. A shift that a known
+    negative Ritz value ``floor`` of (H, S) already rules out (tau <= -floor) is skipped
+    without factoring: it would fail, so the shift found is the same, for fewer
+    factorizations.
     """
     S = _jacobi_scale(H)
     while True:
-        K = H.copy()
-        K.data[asm.diag_pos] += tau * S
-        try:
-            if solver.factor(K) == 0:
-                return tau
-        except SingularMatrixError:
-            pass
+        if tau > -floor:
+            K = H.copy()
+            K.data[asm.diag_pos] += tau * S
+            try:
+                if solver.factor(K) == 0:
+                    return tau
+            except SingularMatrixError:
+                pass
         tau *= 10.0
         if tau > 1e12:
             raise ConvergenceError("could not make the Hessian positive definite", residual=res)
