@@ -589,18 +589,19 @@ class Assembly:
         xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
         x1 = jnp.asarray(np.asarray(x) + np.asarray(dx))
         mixed = set(self.mixed_groups)
-        merit = energy = 0.0
-        for i, g in enumerate(self.groups):
+
+        def one(i: int) -> tuple[float, float]:
+            g = self.groups[i]
             if i in mixed:
                 me = np.concatenate([np.asarray(o) for o in g.run("merit_step", xj, dj)])
                 me = me[: g.n_el].sum(axis=0)
-                merit += float(me[0])
-                energy += float(me[1])
-            else:
-                e = float(self._per_element(g, x1).sum())
-                merit += e
-                energy += e
-        return merit, energy
+                return float(me[0]), float(me[1])
+            e = float(self._per_element(g, x1).sum())
+            return e, e
+
+        # groups side by side as in gradient_hessian, summed in group order
+        parts = list(_pool().map(one, range(len(self.groups))))
+        return sum(p[0] for p in parts), sum(p[1] for p in parts)
 
     @staticmethod
     def symmetric(H_upper: sp.csc_matrix) -> sp.csr_matrix:

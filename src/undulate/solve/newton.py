@@ -274,39 +274,47 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             g, H = asm.gradient_hessian(x)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
-        H_factored = True
-        try:
-            n_neg = solver.factor(H)
-        except SingularMatrixError:
-            n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
-            H_factored = False
+        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
+        S = _jacobi_scale(H)
+        # the last iteration's negative modes, if their Ritz value on the new H is still
+        # clearly negative, prove H indefinite: its factorization (wanted for its inertia) is
+        # skipped then, and done only if the eigen pass needs it
+        floor = _ritz_floor(Hs, S, v_prev) if (n_neg > 0 and opts.require_stable) else 0.0
+        skipped = floor < -opts.marginal
+        H_factored = not skipped
+        if not skipped:
+            try:
+                n_neg = solver.factor(H)
+            except SingularMatrixError:
+                n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
+                H_factored = False
         times["factor"] += time.perf_counter() - t0
         if not np.isfinite(res):
             break
-        stable = n_neg == 0 or not opts.require_stable
+        stable = (n_neg == 0 and not skipped) or not opts.require_stable
         if res <= tol and stable:
             return result(True, it)
         if it == opts.max_iter:
             break
         t0 = time.perf_counter()
         v = None
-        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
-        if n_neg == 0:
+        if n_neg == 0 and not skipped:
             d = _refined_solve(solver, Hs, -g)
         else:
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
-            shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
-            S = _jacobi_scale(H)
-            tau = _shift_until_definite(asm, shift_solver, H, tau, res,
-                                        _ritz_floor(Hs, S, v_prev))
+            shift_solver = (_twin(solver, opts.linear_solver) if (H_factored or skipped)
+                            else solver)
+            tau = _shift_until_definite(asm, shift_solver, H, tau, res, floor)
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
                 k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
+                H_solve = (solver.solve if H_factored else
+                           _lazy_solve(solver, H) if skipped else None)
                 mus, V = _lowest_modes(Hs, S, shift_solver.solve, u.size, rng, v_prev,
-                                       tau, k, solver.solve if H_factored else None)
+                                       tau, k, H_solve)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
@@ -353,6 +361,21 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         recent.append(E)
     return result(False, it, f"no stable equilibrium after {it} iterations: max|g| = "
                              f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+
+
+def _lazy_solve(solver, H: sp.csc_matrix):
+    """``solve`` with H's factorization, done on first use (NaN where H is singular)."""
+    state: dict = {}
+
+    def f(b: np.ndarray) -> np.ndarray:
+        if "ok" not in state:
+            try:
+                solver.factor(H)
+                state["ok"] = True
+            except SingularMatrixError:
+                state["ok"] = False
+        return solver.solve(b) if state["ok"] else np.full(np.shape(b), np.nan)
+    return f
 
 
 def _twin(solver, kind: str):
