@@ -202,8 +202,8 @@ class StrainTerm:
 
     Splitting a strain vector into terms of few variables makes its second derivatives cheap:
     ``d2 (s . e) = sum_t P_t^T d2 (s_t . e_t) P_t`` needs the Hessians of small functions only
-    (for the rod's bending and twist: 12 and 9 variables instead of all 27 intermediates,
-    several times faster under JAX, measured in docs/benchmarks.md).
+    (for the rod's bending and twist: 12 and 9 variables instead of all 27 intermediates;
+    measured on the demo's 99 rod vertices: the mixed grad_hess kernel 7.5 -> 6.2 ms).
     """
 
     project: Callable[..., jnp.ndarray]
