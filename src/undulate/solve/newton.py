@@ -140,6 +140,20 @@ def _inverse_iteration(H: sp.csr_matrix, S: np.ndarray, H_solve, X: np.ndarray,
     return mu, V
 
 
+def _rayleigh_ritz(Z: np.ndarray, HZ: np.ndarray, S: np.ndarray, k: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The k lowest Ritz pairs of (H, S) on span(Z), given HZ = H Z: (theta, V, H V), V
+    S-orthonormal. The basis is S-orthonormalized first, its near-dependent part dropped."""
+    G = Z.T @ (S[:, None] * Z)
+    w, U = np.linalg.eigh(0.5 * (G + G.T))
+    keep = w > 1e-12 * max(w.max(), 1e-300)
+    T = U[:, keep] / np.sqrt(w[keep])
+    A = T.T @ (Z.T @ HZ) @ T
+    theta, C = np.linalg.eigh(0.5 * (A + A.T))
+    TC = T @ C[:, :k]
+    return theta[:k], Z @ TC, HZ @ TC
+
+
 def _lobpcg(H: sp.csr_matrix, S: np.ndarray, M, X: np.ndarray, maxiter: int,
             rtol: float = 1e-2) -> tuple[np.ndarray, np.ndarray, bool]:
     """Lowest eigenpairs of H v = mu S v (S diagonal) by a small LOBPCG, preconditioned by M.
@@ -150,19 +164,7 @@ def _lobpcg(H: sp.csr_matrix, S: np.ndarray, M, X: np.ndarray, maxiter: int,
     eigenvector to many digits. Returns (mu, V, settled), lowest first, V S-orthonormal.
     """
     k = X.shape[1]
-
-    def ritz(Z: np.ndarray, HZ: np.ndarray):
-        # Rayleigh-Ritz on span(Z), S-orthonormalized with its near-dependent part dropped
-        G = Z.T @ (S[:, None] * Z)
-        w, U = np.linalg.eigh(0.5 * (G + G.T))
-        keep = w > 1e-12 * max(w.max(), 1e-300)
-        T = U[:, keep] / np.sqrt(w[keep])
-        A = T.T @ (Z.T @ HZ) @ T
-        theta, C = np.linalg.eigh(0.5 * (A + A.T))
-        TC = T @ C[:, :k]
-        return theta[:k], Z @ TC, HZ @ TC
-
-    mu, X, HX = ritz(X, H @ X)
+    mu, X, HX = _rayleigh_ritz(X, H @ X, S, k)
     P = HP = None
     for _ in range(maxiter):
         R = HX - (S[:, None] * X) * mu
@@ -170,7 +172,7 @@ def _lobpcg(H: sp.csr_matrix, S: np.ndarray, M, X: np.ndarray, maxiter: int,
         HW = H @ W
         Z = np.column_stack([X, W] if P is None else [X, W, P])
         HZ = np.column_stack([HX, HW] if P is None else [HX, HW, HP])
-        mu_new, Xn, HXn = ritz(Z, HZ)
+        mu_new, Xn, HXn = _rayleigh_ritz(Z, HZ, S, k)
         settled = mu_new[0] < 0 and abs(mu_new[0] - mu[0]) <= rtol * abs(mu_new[0])
         # the previous direction: what the new vectors add to the old ones
         c = X.T @ (S[:, None] * Xn)
@@ -274,47 +276,39 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             g, H = asm.gradient_hessian(x)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
-        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
-        S = _jacobi_scale(H)
-        # the last iteration's negative modes, if their Ritz value on the new H is still
-        # clearly negative, prove H indefinite: its factorization (wanted for its inertia) is
-        # skipped then, and done only if the eigen pass needs it
-        floor = _ritz_floor(Hs, S, v_prev) if (n_neg > 0 and opts.require_stable) else 0.0
-        skipped = floor < -opts.marginal
-        H_factored = not skipped
-        if not skipped:
-            try:
-                n_neg = solver.factor(H)
-            except SingularMatrixError:
-                n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
-                H_factored = False
+        H_factored = True
+        try:
+            n_neg = solver.factor(H)
+        except SingularMatrixError:
+            n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
+            H_factored = False
         times["factor"] += time.perf_counter() - t0
         if not np.isfinite(res):
             break
-        stable = (n_neg == 0 and not skipped) or not opts.require_stable
+        stable = n_neg == 0 or not opts.require_stable
         if res <= tol and stable:
             return result(True, it)
         if it == opts.max_iter:
             break
         t0 = time.perf_counter()
         v = None
-        if n_neg == 0 and not skipped:
+        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
+        if n_neg == 0:
             d = _refined_solve(solver, Hs, -g)
         else:
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
-            shift_solver = (_twin(solver, opts.linear_solver) if (H_factored or skipped)
-                            else solver)
-            tau = _shift_until_definite(asm, shift_solver, H, tau, res, floor)
+            shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
+            S = _jacobi_scale(H)
+            tau = _shift_until_definite(asm, shift_solver, H, S, tau, res,
+                                        _ritz_floor(Hs, S, v_prev))
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
                 k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
-                H_solve = (solver.solve if H_factored else
-                           _lazy_solve(solver, H) if skipped else None)
                 mus, V = _lowest_modes(Hs, S, shift_solver.solve, u.size, rng, v_prev,
-                                       tau, k, H_solve)
+                                       tau, k, solver.solve if H_factored else None)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
@@ -363,21 +357,6 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                              f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
 
 
-def _lazy_solve(solver, H: sp.csc_matrix):
-    """``solve`` with H's factorization, done on first use (NaN where H is singular)."""
-    state: dict = {}
-
-    def f(b: np.ndarray) -> np.ndarray:
-        if "ok" not in state:
-            try:
-                solver.factor(H)
-                state["ok"] = True
-            except SingularMatrixError:
-                state["ok"] = False
-        return solver.solve(b) if state["ok"] else np.full(np.shape(b), np.nan)
-    return f
-
-
 def _twin(solver, kind: str):
     """A second solver of the same kind, kept on ``solver`` (its analysis is reused)."""
     twin = getattr(solver, "shift_twin", None)
@@ -417,25 +396,20 @@ def _ritz_floor(Hs: sp.csr_matrix, S: np.ndarray, V: np.ndarray | None) -> float
     if V is None or not np.all(np.isfinite(V)):
         return 0.0
     V = V.reshape(V.shape[0], -1)
-    A = V.T @ (Hs @ V)
-    B = V.T @ (S[:, None] * V)
-    try:
-        w = eigh(0.5 * (A + A.T), 0.5 * (B + B.T), eigvals_only=True)
-    except np.linalg.LinAlgError:
-        return 0.0
-    return float(min(w[0], 0.0))
+    theta, _, _ = _rayleigh_ritz(V, Hs @ V, S, 1)
+    return float(min(theta[0], 0.0)) if theta.size else 0.0
 
 
-def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, tau: float,
-                          res: float, floor: float = 0.0) -> float:
-    """Factor K = H + tau S with tau grown by 10 until K is positive definite; return tau.
+def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, S: np.ndarray,
+                          tau: float, res: float, floor: float = 0.0) -> float:
+    """Factor K = H + tau S (S = :func:`_jacobi_scale` of H) with tau grown by 10 until K is
+    positive definite; return tau.
 
     K keeps H's pattern, so the symbolic factorization is reused. A shift that a known
     negative Ritz value ``floor`` of (H, S) already rules out (tau <= -floor) is skipped
     without factoring: it would fail, so the shift found is the same, for fewer
     factorizations.
     """
-    S = _jacobi_scale(H)
     while True:
         if tau > -floor:
             K = H.copy()
