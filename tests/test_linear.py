@@ -140,14 +140,28 @@ def test_make_solver_kinds():
             make_solver("pardiso")
 
 
-def test_pardiso_runs_on_one_thread_by_default(monkeypatch: pytest.MonkeyPatch):
-    """Same case + seed, same bits: PARDISO is pinned to one thread (UNDULATE_PARDISO_THREADS)."""
+def test_pardiso_threads_are_fixed_and_reproducible():
+    """Same case + seed, same bits: PARDISO factors on a fixed number of threads
+    (UNDULATE_PARDISO_THREADS, default 2, not the machine's cores) in MKL's reproducible
+    mode: refactoring one matrix gives the same solution to the last bit every time."""
     if not linear.pardiso_available():
         pytest.skip("MKL PARDISO not installed (extra 'fast')")
     import ctypes
+    import hashlib
 
     from pypardiso.pardiso_wrapper import PyPardisoSolver
 
     get = PyPardisoSolver().libmkl.MKL_Domain_Get_Max_Threads
     get.restype = ctypes.c_int
-    assert get(linear._MKL_DOMAIN_PARDISO) == 1
+    assert get(linear._MKL_DOMAIN_PARDISO) == linear.pardiso_threads()
+    # an indefinite 2D Laplacian-like matrix, large enough to be factored in parallel
+    m = 140
+    T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    A = (sp.kron(sp.eye(m), T) + sp.kron(T, sp.eye(m)) - 0.05 * sp.eye(m * m)).tocsc()
+    b = np.random.default_rng(0).standard_normal(m * m)
+    s = linear.PardisoSolver()
+    digests = set()
+    for _ in range(12):
+        n_neg = s.factor(sp.triu(A).tocsc())
+        digests.add(hashlib.sha256(s.solve(b).tobytes()).hexdigest())
+    assert n_neg > 0 and len(digests) == 1

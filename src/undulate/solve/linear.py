@@ -111,6 +111,11 @@ class LUSolver:
 @cache
 def _mkl_pardiso():
     """MKL's ``pardiso`` entry point, located through pypardiso (extra ``fast``); None if absent."""
+    # Intel OpenMP's threads spin for 200 ms after each parallel region by default, taking a
+    # core from the assembly that follows (two single-rod runs, h = 0.2, at once on 2 cores,
+    # PARDISO on 2 threads: 30.1 s with the spin, 25.3 s without; 32.1 s on one thread). Read
+    # when MKL's OpenMP runtime starts, so it is set before MKL is loaded; a user's value stays.
+    os.environ.setdefault("KMP_BLOCKTIME", "0")
     try:
         from pypardiso.pardiso_wrapper import PyPardisoSolver
     except ImportError:
@@ -121,19 +126,33 @@ def _mkl_pardiso():
         return None
     fn = lib.pardiso
     fn.restype = None
-    # one thread for PARDISO unless asked otherwise: a multithreaded factorization may sum in
-    # a different order from run to run (same case + seed must give the same bits), and on the
-    # 2-core machines measured one thread was as fast as two (62 vs 80 ms); study workers run
-    # in parallel anyway. UNDULATE_PARDISO_THREADS=k overrides it.
     try:
-        threads = int(os.environ.get("UNDULATE_PARDISO_THREADS", "1"))
         set_threads = lib.MKL_Domain_Set_Num_Threads
         set_threads.restype = ctypes.c_int
         set_threads.argtypes = [ctypes.c_int, ctypes.c_int]
-        set_threads(max(threads, 1), _MKL_DOMAIN_PARDISO)
-    except (AttributeError, ValueError):  # pragma: no cover - other MKL builds
+        set_threads(pardiso_threads(), _MKL_DOMAIN_PARDISO)
+    except AttributeError:  # pragma: no cover - other MKL builds
         pass
     return fn
+
+
+#: PARDISO's threads unless UNDULATE_PARDISO_THREADS says otherwise. Fixed, not the machine's
+#: core count, and run in MKL's conditional numerical reproducibility mode (iparm(34)), so a
+#: case and seed give the same bits on every machine. Measured on the five-rod Hessian (21,063
+#: unknowns, 2-core machine, idle): one refactorization 102-108 ms on one thread, 54-69 ms on
+#: two in this mode; two threads without it gave two different solutions in 20 factorizations
+#: of one matrix.
+PARDISO_THREADS = 2
+
+
+def pardiso_threads() -> int:
+    """The number of threads PARDISO factors with (``UNDULATE_PARDISO_THREADS``, default
+    :data:`PARDISO_THREADS`)."""
+    raw = os.environ.get("UNDULATE_PARDISO_THREADS", str(PARDISO_THREADS))
+    try:
+        return max(int(raw), 1)
+    except ValueError:
+        return PARDISO_THREADS
 
 
 _MKL_DOMAIN_PARDISO = 4  # MKL's domain number for PARDISO (mkl_service.h)
@@ -162,7 +181,9 @@ class PardisoSolver:
             raise ImportError("MKL PARDISO not found: pip install 'undulate[fast]'")
         self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's opaque handle
         self._iparm = np.zeros(64, dtype=np.int32)
-        for k, v in {1: 1, 2: 2, 10: 8, 11: 0, 13: 0, 21: 1, 35: 0}.items():
+        # iparm(34): reproducible results for this many threads (MKL's CNR mode)
+        for k, v in {1: 1, 2: 2, 10: 8, 11: 0, 13: 0, 21: 1, 34: pardiso_threads(),
+                     35: 0}.items():
             self._iparm[k - 1] = v  # 1-based numbers as in MKL's documentation
         self._key: tuple | None = None
         self._factored = False
