@@ -31,6 +31,24 @@ def test_saddle_is_left_for_the_minimum():
     assert abs(x[0, 0] - x[1, 0]) == pytest.approx(np.sqrt(eps / 2), rel=1e-6)
 
 
+def test_curved_budget_counts_only_steps_along_the_watched_unknowns():
+    """``curved_budget``: after that many iterations with a step along negative curvature of
+    the watched unknowns, minimize gives up (the release loop then halves its step). A
+    negative mode outside the watched unknowns (the slack fabric's wrinkles, for the release)
+    does not count."""
+    asm = _pair(0.02)  # the negative mode is x0 - x1 (free unknowns 0 and 3)
+    x0 = np.zeros((2, 3))
+    opts = NewtonOptions(rtol=1e-10, curved_budget=1)
+    on_mode = np.zeros(6, bool)
+    on_mode[[0, 3]] = True
+    stopped = minimize(asm, x0, asm.free(x0), opts, watch=on_mode)
+    assert not stopped.converged and stopped.message.startswith("change of pattern")
+    elsewhere = minimize(asm, x0, asm.free(x0), opts, watch=~on_mode)
+    assert elsewhere.converged and elsewhere.negative_steps > 0
+    assert minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10),
+                    watch=on_mode).converged
+
+
 def test_neutral_mode_within_roundoff_counts_as_stable_but_not_beyond():
     asm = _pair(1e-10)  # relative lowest eigenvalue about -1e-10: a neutral mode
     x0 = np.zeros((2, 3))

@@ -58,3 +58,32 @@ def test_growing_increments_reach_the_end_in_fewer_steps():
     assert s_g[-1] == pytest.approx(0.5)
     nominal = 0.5 / 20
     assert max(b - a for a, b in zip(s_g, s_g[1:], strict=False)) <= 4 * nominal * (1 + 1e-9)
+
+
+def test_long_steps_that_change_pattern_are_taken_again_in_halves():
+    """A release step longer than snap_resolution x nominal gets snap_iterations Newton
+    iterations once it has followed negative curvature of the rods; one that needs more is
+    cut in halves, down to snap_resolution x nominal, and the run still ends released."""
+    budget, resolution = 3, 0.25
+    data = {**SMALL, "release": {**SMALL["release"], "snap_iterations": budget,
+                                 "snap_resolution": resolution}}
+    r = api.simulate(case_from_dict(data))
+    nominal = 0.5 / 20
+    strains = [h["release_strain"] for h in r.history]
+    assert strains[-1] == pytest.approx(0.5)
+    assert r.stats["snap_cuts"] > 0
+    long_rod_curved = [h["newton_iterations"] for a, b, h
+                       in zip(strains, strains[1:], r.history[1:], strict=False)
+                       if b - a > resolution * nominal * (1 + 1e-9)
+                       and h["rod_negative_steps"] > 0]
+    assert all(its <= budget for its in long_rod_curved), long_rod_curved
+    # without the budget (a huge one) the same case takes no such cut
+    data["release"]["snap_iterations"] = 10_000
+    assert api.simulate(case_from_dict(data)).stats["snap_cuts"] == 0
+
+
+def test_snap_budget_off_without_adaptive_steps():
+    """With adaptive = false the increments stay as given (no cuts of any kind)."""
+    data = {**SMALL, "release": {**SMALL["release"], "adaptive": False, "snap_iterations": 1}}
+    r = api.simulate(case_from_dict(data))
+    assert r.stats["snap_cuts"] == 0 and r.stats["step_cuts"] == 0

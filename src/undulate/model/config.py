@@ -155,6 +155,19 @@ class Release(_Strict):
         "buckled, a step that converged in a few Newton iterations without negative "
         "curvature doubles the next increment, up to this (1: equal increments)",
     )
+    snap_iterations: int = Field(
+        12, ge=1, le=100000,
+        description="Newton iterations a release step longer than snap_resolution x the "
+        "nominal increment may take once it has followed negative curvature; a step that "
+        "needs more (a change of the rods' pattern inside it) is taken again in halves, so "
+        "the new pattern grows from just past the strain where the old one ends (with "
+        "adaptive)",
+    )
+    snap_resolution: float = Field(
+        1.0, gt=0.0, le=100.0,
+        description="increment, as a fraction of the nominal one, down to which steps with a "
+        "change of pattern are halved (see snap_iterations)",
+    )
 
 
 class Imperfection(_Strict):

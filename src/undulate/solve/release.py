@@ -8,9 +8,11 @@
    stress-free there.
 3. **Imperfection.** A smooth random out-of-plane displacement (RMS ``amplitude``, correlation
    length ``correlation``, from ``seed``) is added under the rods.
-4. **Release.** The clamp strain goes from eps0 to 0. Quasi-static: equal increments (cut in
-   half on failure when ``adaptive``), each solved to a *stable* equilibrium by
-   :func:`undulate.solve.newton.minimize` from a predictor. Inertial: implicit damped dynamics
+4. **Release.** The clamp strain goes from eps0 to 0. Quasi-static: nominal increments,
+   growing on the smooth buckled branch and cut in half (when ``adaptive``) on failure or
+   when a grown step holds a change of the rods' pattern (``snap_iterations``), each solved to
+   a *stable* equilibrium by :func:`undulate.solve.newton.minimize` from a predictor.
+   Inertial: implicit damped dynamics
    (see :mod:`undulate.solve.dynamics`) with the clamps moving over ``release_time``, then
    ``settle_time`` of settling.
 
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -255,12 +257,14 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
     solver = make_solver(opts.linear_solver)
     rng = np.random.default_rng(sim.case.imperfection.seed + 1)
     history: list[dict] = []
-    totals = dict(newton_iterations=0, negative_curvature_steps=0, step_cuts=0,
+    snap_opts = replace(opts, curved_budget=rel.snap_iterations)
+    totals = dict(newton_iterations=0, negative_curvature_steps=0, step_cuts=0, snap_cuts=0,
                   assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0, line_search_time_s=0.0)
     rod_nodes = [np.concatenate([ch.p, ch.qp, ch.qm]) for ch in sim.mesh.rods]
     on_rod = np.zeros(sim.mesh.n_nodes, dtype=bool)
     for rn in rod_nodes:
         on_rod[rn] = True
+    watch = np.repeat(on_rod, 3)[asm.free_dofs]
     # equilibrium with the imperfection at the start (clamps still at eps0)
     steps = [(e, e)]
     buckled = False
@@ -288,7 +292,13 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
             x_sec = clamp_positions(sim, e_new, x_sec)
             if asm.energy(x_sec) < 2.0 * asm.energy(x_pred):
                 x_pred = x_sec
-        res = minimize(asm, x_pred, asm.free(x_pred), opts, solver=solver, rng=rng, x_ref=x)
+        # a long step gets a budget of Newton iterations once it has followed negative
+        # curvature: one that needs more holds a change of the rods' pattern and is taken
+        # again in halves (below), so the change starts from just past the strain where the
+        # old pattern ends, not from wherever a long jump lands
+        long_step = rel.adaptive and (e_old - e_new) > rel.snap_resolution * de_nom * (1 + 1e-9)
+        res = minimize(asm, x_pred, asm.free(x_pred), snap_opts if long_step else opts,
+                       solver=solver, rng=rng, x_ref=x, watch=watch)
         totals["newton_iterations"] += res.iterations
         totals["negative_curvature_steps"] += res.negative_steps
         totals["assembly_time_s"] += res.times.get("assembly", 0.0)
@@ -299,6 +309,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
             if rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
                 de = (e_old - e_new) / 2
                 totals["step_cuts"] += 1
+                totals["snap_cuts"] += int(long_step and res.message.startswith("change of"))
                 steps.append((e_old, e_old - de))
                 continue
             raise ConvergenceError(
@@ -312,7 +323,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         rec = dict(step=len(history), release_strain=eps0 - e, clamp_strain=e,
                    energy=res.energy, **_heights(sim, x),
                    newton_iterations=res.iterations, negative_steps=res.negative_steps,
-                   residual=res.residual)
+                   rod_negative_steps=res.watched_steps, residual=res.residual)
         history.append(rec)
         if progress is not None:
             progress((eps0 - e) / eps0, rec)
