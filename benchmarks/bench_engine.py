@@ -90,7 +90,7 @@ def bench(name: str, data: dict) -> dict:
     return dict(
         case=name, converged=True, wall_s=wall, setup_s=s["setup_time_s"],
         unknowns=s["n_unknowns"], newton_iterations=s["newton_iterations"],
-        release_steps=s["release_steps"], step_cuts=s["step_cuts"],
+        release_steps=s["release_steps"], step_cuts=s["step_cuts"], snap_cuts=s.get("snap_cuts"),
         median_its_per_step=statistics.median(per_step) if per_step else 0,
         max_its_per_step=max(per_step) if per_step else 0,
         assembly_s=s["assembly_time_s"], factor_s=s["factor_time_s"], eig_s=s["eig_time_s"],
