@@ -23,6 +23,21 @@ def _records(d: Path) -> dict[str, dict]:
     return scan_runs(d).records
 
 
+def test_progress_is_reported_when_not_a_terminal(tmp_path: Path, capsys) -> None:
+    """In a log file or a batch job (stderr not a terminal) every finished run prints a line
+    with the count, the failures and an ETA; a resumed study counts the runs done before."""
+    study = _small_study([0.2, 0.42, 0.6])
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("study: ")]
+    assert len(lines) == 3
+    assert lines[-1].startswith("study: 3/3 done (this sitting: ok 2, failed 1)")
+    assert "ETA" in lines[0]
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, retry_failed=True)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("study: ")]
+    assert lines == [lines[0]] and lines[0].startswith("study: 3/3 done (this sitting: ok 0, "
+                                                       "failed 1)")
+
+
 def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
     study = _small_study([0.2, 0.42, 0.6])
     s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)

@@ -151,7 +151,8 @@ class RunSummary:
 
 
 class _Progress:
-    """Rich progress bar (done / running / failed, ETA); silent when not a terminal."""
+    """Rich progress bar (done / running / failed, ETA) on a terminal; otherwise (a log file, a
+    batch job) one plain line on stderr per finished run."""
 
     def __init__(self, total: int, done0: int, enabled: bool, console: Any = None) -> None:
         self.enabled = enabled
@@ -159,6 +160,9 @@ class _Progress:
         self.failed = 0
         self.running = 0
         self._bar = None
+        self._lines = False
+        self._total, self._done = total, done0
+        self._t0 = time.perf_counter()
         if not enabled:
             return
         from rich.console import Console
@@ -173,7 +177,7 @@ class _Progress:
 
         console = console or Console(stderr=True)
         if not console.is_terminal:
-            self.enabled = False
+            self._lines = True
             return
         self._bar = Progress(
             TextColumn("[bold]study"),
@@ -194,6 +198,15 @@ class _Progress:
         if self._bar is not None:
             self._bar.update(self._task, advance=advance, ok=self.ok, failed=self.failed,
                              running=self.running)
+        elif self._lines and advance:
+            self._done += advance
+            elapsed = time.perf_counter() - self._t0
+            ran = self.ok + self.failed
+            left = self._total - self._done
+            eta = f"{elapsed / ran * left / 60:.1f} min" if ran else "?"
+            print(f"study: {self._done}/{self._total} done (this sitting: ok {self.ok}, failed "
+                  f"{self.failed}), {elapsed / 60:.1f} min elapsed, ETA {eta}",
+                  file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:
