@@ -158,10 +158,10 @@ class Release(_Strict):
     snap_iterations: int = Field(
         12, ge=1, le=100000,
         description="Newton iterations a release step longer than snap_resolution x the "
-        "nominal increment may take once it has followed negative curvature; a step that "
-        "needs more (a change of the rods' pattern inside it) is taken again in halves, so "
-        "the new pattern grows from just past the strain where the old one ends (with "
-        "adaptive)",
+        "nominal increment may take once it has followed negative curvature of the rods; a "
+        "step that needs more (a change of the rods' pattern inside it) is taken again in "
+        "halves, so the new pattern grows from just past the strain where the old one ends "
+        "(with adaptive)",
     )
     snap_resolution: float = Field(
         1.0, gt=0.0, le=100.0,
