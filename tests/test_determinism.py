@@ -53,9 +53,15 @@ linear_solver = "qdldl"
 """
 
 
-def _two_at_once(cache_dir: str | None, case: str = CASE) -> list[str]:
-    env = dict(os.environ)
+def _child_env(**extra: str) -> dict[str, str]:
+    """This environment for a child Python that imports undulate from this checkout."""
+    env = dict(os.environ, **extra)
     env["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def _two_at_once(cache_dir: str | None, case: str = CASE) -> list[str]:
+    env = _child_env()
     if cache_dir is not None:
         env["UNDULATE_JAX_CACHE_DIR"] = cache_dir
     procs = [subprocess.Popen([sys.executable, "-c", _RUN, case], stdout=subprocess.PIPE,
@@ -115,10 +121,9 @@ def test_demo_final_state_does_not_depend_on_roundoff() -> None:
         pytest.skip("MKL PARDISO not installed (extra 'fast')")
     states = []
     for threads in ("1", "2"):
-        env = dict(os.environ, UNDULATE_PARDISO_THREADS=threads)
-        env["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + env.get("PYTHONPATH", "")
         out = subprocess.run([sys.executable, "-c", _DEMO], capture_output=True, text=True,
-                             env=env, timeout=900, check=True).stdout
+                             env=_child_env(UNDULATE_PARDISO_THREADS=threads), timeout=900,
+                             check=True).stdout
         n, E, l_ = [line for line in out.splitlines() if line.startswith("STATE")][0].split()[1:]
         states.append((int(n), float(E), float(l_)))
     (n1, E1, l1), (n2, E2, l2) = states

@@ -45,6 +45,7 @@ def test_curved_budget_counts_only_steps_along_the_watched_unknowns():
     assert not stopped.converged and stopped.message.startswith("change of pattern")
     elsewhere = minimize(asm, x0, asm.free(x0), opts, watch=~on_mode)
     assert elsewhere.converged and elsewhere.negative_steps > 0
+    assert stopped.over_budget and not elsewhere.over_budget
     assert minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10),
                     watch=on_mode).converged
 

@@ -107,6 +107,8 @@ class NewtonResult:
     trace: list = field(default_factory=list)
     #: curved steps with at least WATCH_SHARE of their direction on the ``watch`` unknowns
     watched_steps: int = 0
+    #: stopped by ``opts.curved_budget`` (a change of pattern), not by max_iter or a failure
+    over_budget: bool = False
 
 
 #: a curved step counts towards ``curved_budget`` when at least this share of its direction
@@ -278,9 +280,10 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
     if mixed and x_ref is not None:
         stress = asm.stress_linearized(x_ref, x - x_ref)
 
-    def result(converged: bool, it: int, message: str = "") -> NewtonResult:
+    def result(converged: bool, it: int, message: str = "",
+               over_budget: bool = False) -> NewtonResult:
         return NewtonResult(u, converged, it, res, E, n_neg, neg_steps, dict(times), message,
-                            trace, watched_steps)
+                            trace, watched_steps, over_budget)
 
     for it in range(opts.max_iter + 1):
         t0 = time.perf_counter()
@@ -309,7 +312,7 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         if opts.curved_budget and watched_steps and it >= opts.curved_budget:
             return result(False, it, f"change of pattern: {it} iterations, {watched_steps} "
                                      f"along negative curvature of the watched unknowns "
-                                     f"(budget {opts.curved_budget})")
+                                     f"(budget {opts.curved_budget})", over_budget=True)
         t0 = time.perf_counter()
         v = None
         Hs = asm.symmetric(H)  # the full matrix, formed once per iteration

@@ -309,7 +309,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
             if rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
                 de = (e_old - e_new) / 2
                 totals["step_cuts"] += 1
-                totals["snap_cuts"] += int(long_step and res.message.startswith("change of"))
+                totals["snap_cuts"] += int(res.over_budget)
                 steps.append((e_old, e_old - de))
                 continue
             raise ConvergenceError(

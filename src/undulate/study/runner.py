@@ -155,7 +155,6 @@ class _Progress:
     batch job) one plain line on stderr per finished run."""
 
     def __init__(self, total: int, done0: int, enabled: bool, console: Any = None) -> None:
-        self.enabled = enabled
         self.ok = 0
         self.failed = 0
         self.running = 0
