@@ -87,3 +87,43 @@ def test_snap_budget_off_without_adaptive_steps():
     data = {**SMALL, "release": {**SMALL["release"], "adaptive": False, "snap_iterations": 1}}
     r = api.simulate(case_from_dict(data))
     assert r.stats["snap_cuts"] == 0 and r.stats["step_cuts"] == 0
+
+
+class _Quadratic:
+    """E(u) = u.A u / 2 - b.u on a one-node 'mesh' (all three coordinates free)."""
+
+    def __init__(self) -> None:
+        import numpy as np
+
+        self.A = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 2.0]])
+        self.b = np.array([1.0, 2.0, 3.0])
+
+    def gradient(self, x):
+        return self.A @ x.ravel() - self.b
+
+    def energy(self, x):
+        u = x.ravel()
+        return float(0.5 * u @ self.A @ u - self.b @ u)
+
+    def full(self, u, x_fixed):
+        return u.reshape(1, 3)
+
+    def free(self, x):
+        return x.ravel()
+
+
+def test_chord_correction_takes_the_factored_step_only_when_it_lowers_the_energy():
+    import numpy as np
+
+    from undulate.solve.release import _chord_correction
+
+    q = _Quadratic()
+    x0 = np.zeros((1, 3))
+    exact = SimpleNamespace(solve=lambda r: np.linalg.solve(q.A, r))
+    out = _chord_correction(q, exact, x0)
+    np.testing.assert_allclose(q.A @ out.ravel(), q.b, atol=1e-12)  # the minimum
+    # a factorization that points uphill (here: -A^-1) is refused: the prediction stays
+    uphill = SimpleNamespace(solve=lambda r: -np.linalg.solve(q.A, r))
+    np.testing.assert_array_equal(_chord_correction(q, uphill, x0), x0)
+    broken = SimpleNamespace(solve=lambda r: np.full_like(r, np.nan))
+    np.testing.assert_array_equal(_chord_correction(q, broken, x0), x0)

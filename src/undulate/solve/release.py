@@ -226,6 +226,25 @@ def _affine_predictor(x: np.ndarray, e_old: float, e_new: float, on_rod: np.ndar
     return x_pred
 
 
+def _chord_correction(asm: Assembly, solver, x_pred: np.ndarray) -> np.ndarray:
+    """The predicted start moved by one chord step, ``u -= H^-1 g(x_pred)`` with the Hessian H
+    of the last equilibrium (its factorization is still in ``solver``: no new one is made), when
+    that lowers the energy; ``x_pred`` otherwise.
+
+    The affine and secant predictors leave the fabric next to the rods' ends, and the slack
+    far field at the end of the release, compressed: the start then has tens to hundreds of
+    negative pivots (wrinkles), each followed by its own curved Newton step before the rods
+    move at all. One linear correction from the last equilibrium's stiffness removes most of
+    that (measured on the demo: 252 -> 220 Newton iterations, same final state).
+    """
+    g = asm.gradient(x_pred)
+    du = solver.solve(-g)
+    if not np.all(np.isfinite(du)):
+        return x_pred
+    x_try = asm.full(asm.free(x_pred) + du, x_pred)
+    return x_try if asm.energy(x_try) < asm.energy(x_pred) else x_pred
+
+
 #: a release step that converged in at most this many Newton iterations, none of them along
 #: negative curvature, lets the next increment grow
 EASY_STEP_ITERATIONS = 5
@@ -270,6 +289,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
     buckled = False
     x_prev = None
     e_prev = None
+    chord_ready = False
     while True:
         if steps:
             e_old, e_new = steps.pop()
@@ -292,6 +312,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
             x_sec = clamp_positions(sim, e_new, x_sec)
             if asm.energy(x_sec) < 2.0 * asm.energy(x_pred):
                 x_pred = x_sec
+        if chord_ready:
+            x_pred = _chord_correction(asm, solver, x_pred)
         # a long step gets a budget of Newton iterations once it has followed negative
         # curvature: one that needs more holds a change of the rods' pattern and is taken
         # again in halves (below), so the change starts from just past the strain where the
@@ -305,6 +327,9 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         totals["factor_time_s"] += res.times.get("factor", 0.0)
         totals["eig_time_s"] += res.times.get("eig", 0.0)
         totals["line_search_time_s"] += res.times.get("line_search", 0.0)
+        # the solver now holds the factorization of this attempt's last Hessian: that of the
+        # new equilibrium when it converged
+        chord_ready = res.converged
         if not res.converged:
             if rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
                 de = (e_old - e_new) / 2
