@@ -53,6 +53,9 @@ def metrics(case: Any) -> dict[str, Any]:
     else:
         family = "coherent"
     noise = 1.0 + 0.02 * rng.uniform(-1, 1)
+    # onset: thicker rods later; the outer rods of a group first (more fabric pulls on them)
+    onset0 = 0.05 * (r.h / 0.3) ** 0.5
+    rods_onset = [onset0 * (1.0 if k in (0, r.N - 1) else 1.1) for k in range(r.N)]
     l_rods = [l_val * (1 + 0.03 * rng.uniform(-1, 1)) for _ in range(r.N)]
     return {
         "converged": True,
@@ -69,6 +72,8 @@ def metrics(case: Any) -> dict[str, Any]:
         "r2_arcs_mean": 0.99 - 0.01 * rng.random(),
         "r2_sine_mean": 0.95 + 0.045 * rng.random(),
         "l_rods": json.dumps(l_rods),
+        "onset_release_strain": min(rods_onset),
+        "rods_onset_release_strain": json.dumps(rods_onset),
     }
 
 

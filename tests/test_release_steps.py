@@ -44,6 +44,32 @@ def test_cut_increment_grows_back_to_nominal_only():
     assert _next_increment(0.25, 1.0, 4.0, True, _res(9)) == 0.5
 
 
+def test_onset_substeps_hold_until_buckled_then_double_back():
+    # before buckling: nominal / onset_substeps, even after an easy step
+    assert _next_increment(0.25, 1.0, 4.0, False, _res(1), onset_substeps=4) == 0.25
+    assert _next_increment(0.125, 1.0, 4.0, False, _res(1), onset_substeps=4) == 0.25
+    seen, de = [], 0.25
+    for _ in range(3):
+        de = _next_increment(de, 1.0, 4.0, True, _res(EASY_STEP_ITERATIONS + 1),
+                             onset_substeps=4)
+        seen.append(de)
+    assert seen == [0.5, 1.0, 1.0]
+
+
+def test_onset_substeps_resolve_the_onset_of_the_small_case():
+    """With onset_substeps the steps before the onset are that much shorter, and the onset
+    read from the history is bracketed by them."""
+    data = SMALL | {"release": SMALL["release"] | {"onset_substeps": 4}}
+    r = api.simulate(case_from_dict(data))
+    de = data["release"]["eps0"] / data["release"]["steps"]
+    strains = [h["release_strain"] for h in r.history]
+    assert strains[1] == pytest.approx(de / 4)
+    e = api.onset(r)["onset_release_strain"]
+    assert e is not None
+    k = next(i for i, x in enumerate(strains) if x >= e)
+    assert strains[k] - strains[k - 1] == pytest.approx(de / 4)
+
+
 def test_growing_increments_reach_the_end_in_fewer_steps():
     """The small case buckles early; with growth it needs fewer release steps, every step no
     longer than max_step_factor x nominal, and ends at full release."""

@@ -12,11 +12,12 @@ import pytest
 from undulate.study import collect, get_preset, run_study
 from undulate.study.derived import (
     arcs_beat_sines,
-    fit_eps0_exponent,
+    fit_eps0_exponents,
     fit_l_slope,
     hstar,
     hstar_ratios,
     ok_rows,
+    onset_summary,
     theory,
 )
 from undulate.study.figures import make_figures
@@ -63,8 +64,8 @@ def test_single_rod_figures_and_fits(single_h: Path) -> None:
     assert fit is not None and fit["n_min"] == 7
     assert fit["slope_origin"] == pytest.approx(fit["slope_eq1"], rel=0.1)
     arcs = arcs_beat_sines(df)
-    assert arcs is not None and arcs["n"] == 95 and 0 < arcs["fraction"] <= 1
-    assert fit_eps0_exponent(df) is None  # eps0 not swept
+    assert arcs is not None and arcs["n"] == 135 and 0 < arcs["fraction"] <= 1
+    assert fit_eps0_exponents(df) == []  # eps0 not swept
     assert "## Cost" in text and "sum of run times" in text
 
 
@@ -86,8 +87,9 @@ def test_eps0_figure_and_exponent(tmp_path_factory: pytest.TempPathFactory) -> N
     d = _run(tmp_path_factory, "single-rod-eps0", False)
     made = make_figures(d)
     assert set(made) == {"l_vs_eps0"}
-    exp = fit_eps0_exponent(collect(d))
-    assert exp is not None and -0.8 < exp["exponent"] < -0.2 and exp["n_points"] == 8
+    exps = fit_eps0_exponents(collect(d))
+    assert [e["h"] for e in exps] == [0.2, 0.3, 0.5]  # one fit per thickness
+    assert all(-0.8 < e["exponent"] < -0.2 and e["n_points"] == 10 for e in exps)
     assert "exponent" in write_report(d).read_text()
 
 
@@ -104,6 +106,9 @@ def test_parallel_figures_hstar_and_bundling(parallel: Path) -> None:
     for name in ("phase_diagram", "master_curve", "quantized_flattening"):
         assert (parallel / "figures" / f"{name}.png").is_file()
         assert f"figures/{name}.png" in text
+    ons = onset_summary(df)
+    assert ons["n_multi"] == 8 and ons["outer_first"] == 8  # s > 0: five rods, outer first
+    assert "Onset of buckling" in text and "in 8 of 8 runs" in text
     assert not (parallel / "figures" / "single_rod_h.png").exists()
     assert "| 3->1 |" in text and "N^(1/3)" in text and "figures/phase_diagram.png" in text
 

@@ -15,8 +15,8 @@ from undulate.study.spec import build_study, frange, set_path
 @pytest.mark.parametrize(
     ("name", "quick", "count"),
     [
-        ("single-rod-h", False, 97),
-        ("single-rod-eps0", False, 8),
+        ("single-rod-h", False, 137),
+        ("single-rod-eps0", False, 30),
         ("parallel-phase-diagram", False, 420),
         ("single-rod-h", True, 19),
         ("parallel-phase-diagram", True, 12),
@@ -32,8 +32,11 @@ def test_preset_sizes_and_valid_cases(name: str, quick: bool, count: int) -> Non
 
 def test_single_rod_h_grid_ends_and_defaults() -> None:
     runs = get_preset("single-rod-h").runs
-    hs = [r.params["rods.h"] for r in runs]
-    assert hs[0] == 0.08 and hs[-1] == 2.0 and hs[1] == 0.1
+    hs = [r.params["rods.h"] for r in runs if r.seed == 0]
+    assert hs[0] == 0.08 and hs[-1] == 2.0 and hs[1] == 0.1 and len(hs) == 97
+    # the spread: seeds 1 and 2 at every 5th thickness
+    spread = sorted((r.params["rods.h"], r.seed) for r in runs if r.seed > 0)
+    assert len(spread) == 40 and spread[:3] == [(0.08, 1), (0.08, 2), (0.18, 1)]
     assert all(r.case["rods"]["N"] == 1 and r.case["release"]["eps0"] == 0.5 for r in runs)
 
 
@@ -55,7 +58,7 @@ def test_s0_means_one_wide_rod() -> None:
 
 def test_seeds_axis_and_ids_stable() -> None:
     a = get_preset("single-rod-eps0", seeds=3)
-    assert len(a.runs) == 24
+    assert len(a.runs) == 90
     assert sorted({r.seed for r in a.runs}) == [0, 1, 2]
     b = get_preset("single-rod-eps0", seeds=3)
     assert [r.id for r in a.runs] == [r.id for r in b.runs]

@@ -92,34 +92,50 @@ def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
     return rec
 
 
-#: a rod counts as lifted once it has left its printed level by this many imperfection RMS
-ONSET_HEIGHT_FACTOR = 10.0
+#: a rod counts as buckled once its centre line has left its printed level by this many rod
+#: thicknesses (the bilayer's smooth curl before buckling stays a fraction of h)
+ONSET_DEFLECTION = 1.0
+
+
+def _crossing(strains: list[float], values: list[float], thr: float) -> float | None:
+    """Release strain at which ``values`` first exceeds ``thr``, linear between the two
+    release steps that bracket it; None if it never does."""
+    for k, v in enumerate(values):
+        if v > thr:
+            if k == 0:
+                return float(strains[0])
+            e0, e1, v0 = strains[k - 1], strains[k], values[k - 1]
+            return float(e0 + (e1 - e0) * (thr - v0) / (v - v0))
+    return None
 
 
 def onset(result: SimResult) -> dict[str, Any]:
     """When buckling began, from the release history (release strains, as fractions of 1).
 
-    ``onset_release_strain``: the first release step whose equilibrium needed a negative-
-    curvature step, i.e. where the flat (or previous) branch had lost stability; None if none
-    did. ``onset_height_release_strain``: the first step where some rod's centre line left its
-    printed level by more than ``ONSET_HEIGHT_FACTOR`` x the imperfection RMS (the sheet curls
-    smoothly from the first step because the rod sits above the fabric's mid-surface, so this
-    one can come before any instability). ``rods_onset_release_strain`` (JSON list): the same
-    height rule per rod, which tells which rods go first.
+    ``onset_release_strain``: where the rods first stand out of their printed level by
+    ``ONSET_DEFLECTION`` x their thickness h (largest deflection up or down over all rods),
+    interpolated linearly between the two release steps that bracket it. Why not a multiple
+    of the imperfection: the rod sits above the fabric's mid-surface, so the sheet curls
+    smoothly from the first step (default rod: 3 um per 0.0016 of release strain, 10 x the
+    imperfection by 0.005), long before the deflection takes off near 0.085.
+    ``rods_onset_release_strain`` (JSON list): the same rule per rod, which tells which rods
+    go first. ``onset_negative_curvature_release_strain``: the first release step whose
+    equilibrium needed a negative-curvature step (the previous branch had lost stability);
+    None if none did (a release in small steps can follow the imperfect branch smoothly).
+    Resolution: the increments before the onset, eps0 / (steps x release.onset_substeps).
     """
     hist = result.history
-    amp = result.case.imperfection.amplitude
-    thr = ONSET_HEIGHT_FACTOR * amp if amp > 0 else 1e-3
-    stab = next((h["release_strain"] for h in hist if h.get("negative_steps", 0) > 0), None)
-    height = next((h["release_strain"] for h in hist
-                   if h.get("max_deflection", 0.0) > thr), None)
-    n_rods = len(result.centerlines)
+    thr = ONSET_DEFLECTION * result.section.h
+    strains = [h["release_strain"] for h in hist]
+    unstable = next((h["release_strain"] for h in hist if h.get("negative_steps", 0) > 0), None)
+    first = _crossing(strains, [h.get("max_deflection", 0.0) for h in hist], thr)
     per_rod = []
-    for k in range(n_rods):
-        per_rod.append(next((h["release_strain"] for h in hist
-                             if len(h.get("rod_max_deflection", [])) > k
-                             and h["rod_max_deflection"][k] > thr), None))
-    return {"onset_release_strain": stab, "onset_height_release_strain": height,
+    for k in range(len(result.centerlines)):
+        per_rod.append(_crossing(strains, [h["rod_max_deflection"][k]
+                                           if len(h.get("rod_max_deflection", [])) > k
+                                           else 0.0 for h in hist], thr))
+    return {"onset_release_strain": first,
+            "onset_negative_curvature_release_strain": unstable,
             "rods_onset_release_strain": json.dumps(per_rod)}
 
 

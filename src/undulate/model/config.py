@@ -155,6 +155,12 @@ class Release(_Strict):
         "buckled, a step that converged in a few Newton iterations without negative "
         "curvature doubles the next increment, up to this (1: equal increments)",
     )
+    onset_substeps: int = Field(
+        1, ge=1, le=1024,
+        description="until the rods have buckled, the release advances by the nominal "
+        "increment divided by this, so the onset of buckling is resolved to eps0 / (steps x "
+        "onset_substeps); afterwards the increment doubles back to the nominal one",
+    )
     snap_iterations: int = Field(
         12, ge=1, le=100000,
         description="Newton iterations a release step longer than snap_resolution x the "

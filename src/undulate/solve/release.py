@@ -252,17 +252,21 @@ EASY_STEP_ITERATIONS = 5
 BUCKLED_DEFLECTION = 2.0
 
 
-def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, res) -> float:
+def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, res,
+                    onset_substeps: int = 1) -> float:
     """The next release increment after a converged step of size ``de``.
 
-    Before the rods have buckled (``buckled``: decided by the release loop) and after every
-    step that needed negative curvature or more than :data:`EASY_STEP_ITERATIONS` iterations,
-    the increment goes back towards the nominal one (a cut increment doubles back to it): the
-    onset and the changes of pattern are taken at the nominal resolution. On the smooth
-    post-buckling branch an easy step doubles the increment, up to ``max_factor`` x nominal.
+    Before the rods have buckled (``buckled``: decided by the release loop) the increment is
+    ``de_nom / onset_substeps`` (a cut increment doubles back to it), which sets how finely
+    the onset is resolved. After every step that needed negative curvature or more than
+    :data:`EASY_STEP_ITERATIONS` iterations, the increment goes back towards the nominal one:
+    the changes of pattern are taken at the nominal resolution. On the smooth post-buckling
+    branch an easy step doubles the increment, up to ``max_factor`` x nominal.
     """
+    if not buckled:
+        return min(2.0 * de, de_nom / onset_substeps)
     easy = res.negative_steps == 0 and res.iterations <= EASY_STEP_ITERATIONS
-    return min(2.0 * de, (max_factor if buckled and easy else 1.0) * de_nom)
+    return min(2.0 * de, (max_factor if easy else 1.0) * de_nom)
 
 
 def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
@@ -272,7 +276,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
     de_nom = eps0 / rel.steps
     de_min = de_nom * rel.min_step_fraction
     e = eps0
-    de = de_nom
+    de = de_nom / rel.onset_substeps
     solver = make_solver(opts.linear_solver)
     rng = np.random.default_rng(sim.case.imperfection.seed + 1)
     history: list[dict] = []
@@ -359,7 +363,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # of the bilayer before buckling is a fraction of h)
         buckled = (buckled or res.negative_steps > 0
                    or rec["max_deflection"] > BUCKLED_DEFLECTION * sim.section.h)
-        de = _next_increment(de, de_nom, rel.max_step_factor, buckled, res)
+        de = _next_increment(de, de_nom, rel.max_step_factor, buckled, res, rel.onset_substeps)
     totals["release_steps"] = len(history) - 1
     totals["converged"] = True
     totals["linear_solver"] = solver.name

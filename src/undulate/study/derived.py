@@ -20,9 +20,10 @@ __all__ = [
     "per_point",
     "hstar",
     "fit_l_slope",
-    "fit_eps0_exponent",
+    "fit_eps0_exponents",
     "arcs_beat_sines",
     "hstar_ratios",
+    "onset_summary",
 ]
 
 
@@ -152,20 +153,25 @@ def fit_l_slope(df: pd.DataFrame, n_min: int | None = None) -> dict[str, float] 
             "n_points": int(len(d)), "eps0": eps0, "n_min": n_min, "h_below": h_one}
 
 
-def fit_eps0_exponent(df: pd.DataFrame) -> dict[str, float] | None:
-    """Least-squares slope of ``log l_mean`` vs ``log eps0`` (eq. (1): -1/2), per fixed h."""
+def fit_eps0_exponents(df: pd.DataFrame) -> list[dict[str, float]]:
+    """Least-squares slope of ``log l_mean`` vs ``log eps0`` (eq. (1): -1/2), one fit per rod
+    thickness h with at least two pre-stretches (seeds enter as separate points); empty
+    when eps0 is not swept."""
     d = ok_rows(df)
     if d.empty or "l_mean" not in d or not is_swept(d, "eps0"):
-        return None
+        return []
     d = d.assign(_l=pd.to_numeric(d["l_mean"], errors="coerce"))
     d = d[(d["_l"] > 0) & (d["eps0"] > 0)]
-    if "h" in d and d["h"].nunique() > 1:
-        d = d[d["h"] == d["h"].mode().iloc[0]]
-    if d["eps0"].nunique() < 2:
-        return None
-    p, c = np.polyfit(np.log(d["eps0"].to_numpy(float)), np.log(d["_l"].to_numpy(float)), 1)
-    return {"exponent": float(p), "exponent_eq1": -0.5, "prefactor": float(math.exp(c)),
-            "n_points": int(len(d)), "h": float(d["h"].iloc[0]) if "h" in d else float("nan")}
+    if "h" not in d:
+        d = d.assign(h=float("nan"))
+    out = []
+    for h, g in d.groupby("h", dropna=False, sort=True):
+        if g["eps0"].nunique() < 2:
+            continue
+        p, c = np.polyfit(np.log(g["eps0"].to_numpy(float)), np.log(g["_l"].to_numpy(float)), 1)
+        out.append({"exponent": float(p), "exponent_eq1": -0.5, "prefactor": float(math.exp(c)),
+                    "n_points": int(len(g)), "h": float(h)})
+    return out
 
 
 def arcs_beat_sines(df: pd.DataFrame) -> dict[str, float] | None:
@@ -198,4 +204,32 @@ def hstar_ratios(df: pd.DataFrame, n_nominal: int | None = None) -> list[dict[st
         out.append({"transition": f"{n_from}->{n_to}", "hstar_s_min": lo, "hstar_s_max": hi,
                     "s_min": s_lo, "s_max": s_hi, "ratio": ratio,
                     "bundling": n_nominal ** (1.0 / 3.0), "N": n_nominal})
+    return out
+
+
+def onset_summary(df: pd.DataFrame) -> dict[str, Any] | None:
+    """The onset of buckling over a study: ``n``, ``min``, ``median``, ``max`` of
+    ``onset_release_strain``, and for runs of three or more rods ``outer_first`` / ``n_multi``:
+    in how many of them an outer rod (first or last) reached the onset no later than every
+    inner one. None without onset data."""
+    d = ok_rows(df)
+    if d.empty or "onset_release_strain" not in d:
+        return None
+    e = pd.to_numeric(d["onset_release_strain"], errors="coerce").dropna()
+    if e.empty:
+        return None
+    out: dict[str, Any] = {"n": int(len(e)), "min": float(e.min()),
+                           "median": float(e.median()), "max": float(e.max())}
+    outer = multi = 0
+    for text in d.get("rods_onset_release_strain", pd.Series(dtype=object)).dropna():
+        try:
+            rods = json.loads(str(text))
+        except ValueError:
+            continue
+        if len(rods) < 3 or any(v is None for v in rods):
+            continue
+        multi += 1
+        outer += int(min(rods[0], rods[-1]) <= min(rods[1:-1]))
+    if multi:
+        out.update(outer_first=outer, n_multi=multi)
     return out

@@ -33,6 +33,11 @@ FAMILY_COLORS = {
 }
 
 
+#: thickness figures need at least this many distinct h (the eps0 study's three are a
+#: parameter of that figure, not a sweep to plot against)
+MIN_H_VALUES = 4
+
+
 def _save(fig: Figure, outdir: Path, name: str) -> list[Path]:
     outdir.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -63,7 +68,8 @@ def _ln_marks(ax: Any, L: float, ymax: float, n_max: int = 9, side: str = "right
 def fig_single_rod_h(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
     """l, lambda, a, R, n vs h for single rods (per eps0), with eq. (1) and its companions."""
     d = ok_rows(df)
-    if d.empty or not is_swept(d, "h") or is_swept(d, "s") or "l_mean" not in d:
+    if (d.empty or not is_swept(d, "h") or is_swept(d, "s") or "l_mean" not in d
+            or d["h"].nunique() < MIN_H_VALUES):
         return None
     d = d.assign(n=n_values(d))
     th = theory()
@@ -239,7 +245,8 @@ def fig_master_curve(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
 def fig_quantized_flattening(df: pd.DataFrame, outdir: Path, n_max: int = 9) -> list[Path] | None:
     """a and lambda vs h across the plateaus n <= n_max (single rods, or the largest s)."""
     d = ok_rows(df)
-    if d.empty or not is_swept(d, "h") or not {"a_mean", "lam_mean"} <= set(d):
+    if (d.empty or not is_swept(d, "h") or not {"a_mean", "lam_mean"} <= set(d)
+            or d["h"].nunique() < MIN_H_VALUES):
         return None
     label = "single rod"
     if is_swept(d, "s"):

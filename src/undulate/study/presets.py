@@ -4,8 +4,10 @@
 preset                     full                                   quick
 =========================  =====================================  ==============================
 single-rod-h               h = 0.08..2.0 step 0.02 (97), N = 1,   h = 0.2..2.0 step 0.1 (19)
-                           eps0 = 0.5
-single-rod-eps0            eps0 in [0.1 .. 1.0] (8), h = 0.3      eps0 in [0.1, 0.3, 0.5, 1.0]
+                           eps0 = 0.5; seeds 1, 2 also at every
+                           5th h (40 more): 137 runs
+single-rod-eps0            eps0 = 0.1..1.0 step 0.1 (10) x        eps0 in [0.1, 0.3, 0.5, 1.0],
+                           h in [0.2, 0.3, 0.5]: 30 runs          h = 0.3
 parallel-phase-diagram     N = 5, h = 0.1..2.0 step 0.1 (20),     h = 0.2..2.0 step 0.6 (4),
                            s = 0..50 step 2.5 (21): 420 runs      s in [0, 10, 50]: 12
 =========================  =====================================  ==============================
@@ -57,24 +59,35 @@ def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any]) -> dict[st
     return _merge(base, QUICK_OVERRIDES) if quick else base
 
 
+#: seeds of the spread sub-grid of ``single-rod-h`` (every SPREAD_EVERY-th thickness)
+SPREAD_SEEDS = (0, 1, 2)
+SPREAD_EVERY = 5
+
+
 def _single_rod_h(quick: bool, seeds: int | None) -> Study:
     hs = frange(0.2, 2.0, 0.1) if quick else frange(0.08, 2.0, 0.02)
-    return build_study(
-        "single-rod-h",
-        _base(quick, {"N": 1, "h": 0.3}, {"eps0": 0.5}),
-        {"rods.h": hs},
-        kind="preset",
-        seeds=seeds,
-        quick=quick,
-    )
+    base = _base(quick, {"N": 1, "h": 0.3}, {"eps0": 0.5})
+    study = build_study("single-rod-h", base, {"rods.h": hs}, kind="preset", seeds=seeds,
+                        quick=quick)
+    if seeds is not None or quick:
+        return study
+    # the spread: seeds 0, 1, 2 at every 5th thickness (seed 0 is already in the grid)
+    spread = build_study("single-rod-h", base, {"rods.h": hs[::SPREAD_EVERY]},
+                         kind="preset", seeds=list(SPREAD_SEEDS), quick=quick)
+    known = {r.id for r in study.runs}
+    study.runs.extend(r for r in spread.runs if r.id not in known)
+    study.definition["spread"] = {"rods.h": hs[::SPREAD_EVERY],
+                                  "imperfection.seed": list(SPREAD_SEEDS)}
+    return study
 
 
 def _single_rod_eps0(quick: bool, seeds: int | None) -> Study:
-    eps = [0.1, 0.3, 0.5, 1.0] if quick else [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0]
+    eps = [0.1, 0.3, 0.5, 1.0] if quick else frange(0.1, 1.0, 0.1)
+    hs = [0.3] if quick else [0.2, 0.3, 0.5]
     return build_study(
         "single-rod-eps0",
         _base(quick, {"N": 1, "h": 0.3}, {}),
-        {"release.eps0": eps},
+        {"rods.h": hs, "release.eps0": eps},
         kind="preset",
         seeds=seeds,
         quick=quick,

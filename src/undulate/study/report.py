@@ -17,7 +17,14 @@ from typing import Any
 
 import pandas as pd
 
-from .derived import arcs_beat_sines, fit_eps0_exponent, fit_l_slope, hstar_ratios, theory
+from .derived import (
+    arcs_beat_sines,
+    fit_eps0_exponents,
+    fit_l_slope,
+    hstar_ratios,
+    onset_summary,
+    theory,
+)
 from .figures import make_figures
 from .storage import collect, read_study
 
@@ -82,8 +89,8 @@ def build_report(
             f"| fitted / eq. (1) - 1 | {_f(100 * rel_err, '.1f')} % |",
             "",
         ]
-    exp = fit_eps0_exponent(df)
-    if exp:
+    exps = fit_eps0_exponents(df)
+    for exp in exps:
         lines += [
             f"**l vs eps0** (log-log fit, h = {_f(exp['h'])} mm, {exp['n_points']} points): "
             f"exponent {_f(exp['exponent'], '.3f')} (eq. (1): -0.5).",
@@ -94,6 +101,17 @@ def build_report(
         lines += [
             f"**Arcs vs sines**: circular arcs fit better (R² higher) in {arcs['wins']} of "
             f"{arcs['n']} runs ({_f(100 * arcs['fraction'], '.1f')} %).",
+            "",
+        ]
+    ons = onset_summary(df)
+    if ons:
+        lines += [
+            f"**Onset of buckling** (release strain where the rods first stand out of their "
+            f"printed level by their thickness h; {ons['n']} runs): min {_f(ons['min'], '.4f')}, "
+            f"median {_f(ons['median'], '.4f')}, max {_f(ons['max'], '.4f')}."
+            + (f" An outer rod went first (no later than every inner one) in "
+               f"{ons['outer_first']} of {ons['n_multi']} runs of three or more rods."
+               if "n_multi" in ons else ""),
             "",
         ]
     ratios = hstar_ratios(df, meta.get("definition", {}).get("N_nominal"))
@@ -113,7 +131,7 @@ def build_report(
                 f"{_f(r['ratio'], '.3f')} | {_f(r['bundling'], '.3f')} |"
             )
         lines.append("")
-    if not (fit or exp or arcs or ratios):
+    if not (fit or exps or arcs or ons or ratios):
         lines += ["No comparison possible with the data present.", ""]
     lines += _cost_lines(df)
     if n_failed and "error" in df:

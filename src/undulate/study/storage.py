@@ -234,7 +234,8 @@ def _isnan(v: Any) -> bool:
 CSV_COLUMNS: tuple[str, ...] = (
     "run_id", "status", "seed", "h", "s", "eps0", "N", "L", "b", "margin_y", "family", "n",
     "l_mean", "l_std", "lam_mean", "a_mean", "R_mean", "R_up_mean", "R_down_mean",
-    "r2_arcs_mean", "r2_sine_mean", "onset_release_strain", "onset_height_release_strain",
+    "r2_arcs_mean", "r2_sine_mean", "onset_release_strain",
+    "onset_negative_curvature_release_strain",
     "wall_time_s", "newton_iterations", "rods_n", "rods_l", "rods_a",
     "rods_onset_release_strain",
 )
