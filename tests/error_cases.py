@@ -38,6 +38,7 @@ class ErrorCase:
     what: str  # the bad input, as the table shows it
     setup: Callable[[Path], list[str]]
     expect: tuple[str, ...]  # fragments the message must contain
+    env: tuple[tuple[str, str], ...] = ()  # environment settings of the command
     code: int = 2
 
 
@@ -232,6 +233,15 @@ CASES: list[ErrorCase] = [
     ErrorCase("incomplete", "Run folder (`undulate analyse DIR`)",
               "the hidden folder of an interrupted run",
               _analyse(lambda r: None, ".run1.incomplete-x1y2"), ("interrupted or unfinished",)),
+    # ---- environment --------------------------------------------------------------------
+    ErrorCase("pardiso-threads", "Environment settings (any command)",
+              "`UNDULATE_PARDISO_THREADS=two`", lambda d: ["demo", "--out", "run1"],
+              ("UNDULATE_PARDISO_THREADS", "whole number from 1 to 256", "'two'"),
+              env=(("UNDULATE_PARDISO_THREADS", "two"),)),
+    ErrorCase("pardiso-threads-zero", "Environment settings (any command)",
+              "`UNDULATE_PARDISO_THREADS=0`", lambda d: ["theory", "--h", "0.3"],
+              ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
+              env=(("UNDULATE_PARDISO_THREADS", "0"),)),
     # ---- theory -------------------------------------------------------------------------
     ErrorCase("theory-eps0", "Analytical model (`undulate theory`): the case file's ranges",
               "`--eps0 50`", lambda d: ["theory", "--eps0", "50"],

@@ -27,7 +27,7 @@ def run_case(case: ErrorCase, workdir: Path,
     monkeypatch.setattr(undulate.api, "simulate", _no_simulation)
     monkeypatch.chdir(workdir)
     args = case.setup(workdir)
-    res = CliRunner().invoke(app, args, env={"COLUMNS": "200"})
+    res = CliRunner().invoke(app, args, env={"COLUMNS": "200", **dict(case.env)})
     if res.exception is not None and not isinstance(res.exception, SystemExit):
         raise res.exception
     return res.exit_code, res.stderr, args

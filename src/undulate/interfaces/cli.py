@@ -34,6 +34,17 @@ def _fail(msg: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code=code)
 
 
+@app.callback()
+def _settings() -> None:
+    """Check the environment settings before any command runs (one line if one is bad)."""
+    from ..solve.linear import SettingError, pardiso_threads
+
+    try:
+        pardiso_threads()
+    except SettingError as err:
+        raise _fail(str(err)) from None
+
+
 def _step_text(rec: dict, steps: int | None) -> str:
     k = rec.get("step", "?")
     of = f"/{steps}" if isinstance(k, int) and steps and k <= steps else ""

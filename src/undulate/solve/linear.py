@@ -145,14 +145,23 @@ def _mkl_pardiso():
 PARDISO_THREADS = 2
 
 
+class SettingError(ValueError):
+    """An environment setting of undulate is invalid (the message names it and its range)."""
+
+
 def pardiso_threads() -> int:
     """The number of threads PARDISO factors with (``UNDULATE_PARDISO_THREADS``, default
-    :data:`PARDISO_THREADS`)."""
+    :data:`PARDISO_THREADS`); anything but a whole number from 1 to 256 raises
+    :class:`SettingError`."""
     raw = os.environ.get("UNDULATE_PARDISO_THREADS", str(PARDISO_THREADS))
     try:
-        return max(int(raw), 1)
+        n = int(raw.strip())
     except ValueError:
-        return PARDISO_THREADS
+        n = 0
+    if not 1 <= n <= 256:
+        raise SettingError(f"UNDULATE_PARDISO_THREADS: must be a whole number from 1 to 256 "
+                           f"(got {raw!r})")
+    return n
 
 
 _MKL_DOMAIN_PARDISO = 4  # MKL's domain number for PARDISO (mkl_service.h)
