@@ -68,3 +68,26 @@ def test_case_file_with_a_byte_order_mark_is_read(tmp_path):
     p.write_bytes(b"\xef\xbb\xbf" + b'name = "bom"\n[rods]\nh = 0.4\n')
     case = load_case(p)
     assert case.name == "bom" and case.rods.h == 0.4
+
+
+def test_material_defaults_are_set_once():
+    """The analytical model, the study tables, the presets and `undulate theory` take their
+    material defaults from the case file's fields (MATERIAL_DEFAULTS)."""
+    import inspect
+
+    from undulate import theory
+    from undulate.interfaces.cli_analysis import _MAT
+    from undulate.model import MATERIAL_DEFAULTS, case_from_dict
+    from undulate.study.presets import get_preset
+    from undulate.study.storage import PARAM_ALIASES
+
+    case = case_from_dict({})
+    assert MATERIAL_DEFAULTS == {"b": case.rods.b, "E_B": case.rods.E_B, "E": case.fabric.E,
+                                 "t": case.fabric.t}
+    assert theory.DEFAULTS == MATERIAL_DEFAULTS and _MAT is MATERIAL_DEFAULTS
+    sig = inspect.signature(theory.l).parameters
+    assert {k: sig[k].default for k in MATERIAL_DEFAULTS} == MATERIAL_DEFAULTS
+    assert {k: PARAM_ALIASES[k][1] for k in MATERIAL_DEFAULTS} == MATERIAL_DEFAULTS
+    run = get_preset("single-rod-h").runs[0].case
+    assert (run["rods"]["b"], run["rods"]["E_B"], run["fabric"]["E"], run["fabric"]["t"]) == \
+        tuple(MATERIAL_DEFAULTS[k] for k in ("b", "E_B", "E", "t"))

@@ -12,6 +12,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from ..model.config import MATERIAL_DEFAULTS as _MAT
+
 __all__ = ["register"]
 
 
@@ -96,14 +98,16 @@ def theory(
     eps0: Annotated[
         float, typer.Option("--eps0", help=_opt_help("pre-stretch strain [-]", "--eps0"))
     ] = 0.5,
-    b: Annotated[float, typer.Option("--b", help=_opt_help("rod width [mm]", "--b"))] = 1.0,
+    b: Annotated[float, typer.Option("--b", help=_opt_help("rod width [mm]", "--b"))] = _MAT["b"],
     E_B: Annotated[
         float, typer.Option("--E-B", help=_opt_help("rod Young's modulus [MPa]", "--E-B"))
-    ] = 3000.0,
+    ] = _MAT["E_B"],
     E: Annotated[
         float, typer.Option("--E", help=_opt_help("fabric Young's modulus [MPa]", "--E"))
-    ] = 0.45,
-    t: Annotated[float, typer.Option("--t", help=_opt_help("fabric thickness [mm]", "--t"))] = 0.4,
+    ] = _MAT["E"],
+    t: Annotated[
+        float, typer.Option("--t", help=_opt_help("fabric thickness [mm]", "--t"))
+    ] = _MAT["t"],
     L: Annotated[float, typer.Option("--L", help=_opt_help("rod length [mm]", "--L"))] = 100.0,
     N: Annotated[int, typer.Option("--N", help=_opt_help("number of parallel rods", "--N"))] = 5,
     s: Annotated[

@@ -1,6 +1,7 @@
 """Model stage: what is simulated (fabric, rods, release, imperfection), validated."""
 
 from .config import (
+    MATERIAL_DEFAULTS,
     Case,
     ConfigError,
     Dynamics,
@@ -16,6 +17,7 @@ from .config import (
 )
 
 __all__ = [
+    "MATERIAL_DEFAULTS",
     "Case",
     "ConfigError",
     "Dynamics",

@@ -20,7 +20,7 @@ import math
 import re
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, ValidationError, model_validator
 
@@ -475,3 +475,16 @@ def check_value(model: type[BaseModel], name: str, value: object, label: str) ->
         raise ConfigError(
             f"{label}: {msg}" + (f" (allowed: {rng})" if rng else "") + f"; got {value!r}"
         ) from None
+
+
+def _default(model: type[BaseModel], name: str) -> Any:
+    return model.model_fields[name].default
+
+
+#: The material and section defaults of the case file, the one place they are set: rod width
+#: b [mm], rod modulus E_B [MPa], fabric modulus E [MPa], fabric thickness t [mm]. The
+#: analytical model, the study tables and the command line take theirs from here.
+MATERIAL_DEFAULTS: dict[str, float] = {
+    "b": _default(Rods, "b"), "E_B": _default(Rods, "E_B"),
+    "E": _default(Fabric, "E"), "t": _default(Fabric, "t"),
+}

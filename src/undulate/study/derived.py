@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..model.config import MATERIAL_DEFAULTS
+
 __all__ = [
     "theory",
     "ok_rows",
@@ -75,7 +77,7 @@ def is_swept(df: pd.DataFrame, col: str) -> bool:
 def material(df: pd.DataFrame) -> dict[str, float]:
     """b, E_B, E, t of the study (medians; they are constants in the presets)."""
     out = {}
-    for k, default in (("b", 1.0), ("E_B", 3000.0), ("E", 0.45), ("t", 0.4)):
+    for k, default in MATERIAL_DEFAULTS.items():
         out[k] = float(df[k].median()) if k in df and df[k].notna().any() else default
     return out
 

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..model.config import MATERIAL_DEFAULTS
 from .spec import Study, StudyError, build_study, frange, load_sweep_toml
 
 __all__ = ["PRESETS", "preset_names", "get_preset", "resolve_study", "QUICK_OVERRIDES"]
@@ -50,8 +51,9 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any]) -> dict[str, Any]:
     base: dict[str, Any] = {
-        "fabric": {"E": 0.45, "t": 0.4},
-        "rods": {"b": 1.0, "L": 100.0, "E_B": 3000.0, **rods},
+        "fabric": {"E": MATERIAL_DEFAULTS["E"], "t": MATERIAL_DEFAULTS["t"]},
+        "rods": {"b": MATERIAL_DEFAULTS["b"], "L": 100.0, "E_B": MATERIAL_DEFAULTS["E_B"],
+                 **rods},
         "release": {"eps0": 0.5, **release},
         "imperfection": {"seed": 0},
         "mode": "quasi-static",

@@ -28,6 +28,7 @@ from typing import Any
 import pandas as pd
 
 from ..fileio import atomic_path, current_umask, default_mode  # noqa: F401 (re-exported)
+from ..model.config import MATERIAL_DEFAULTS
 from .spec import get_path
 
 __all__ = [
@@ -54,14 +55,14 @@ STATUSES = ("ok", "failed")
 #: short column name -> dotted path in the (effective) case, with the Case default
 PARAM_ALIASES: dict[str, tuple[str, Any]] = {
     "h": ("rods.h", 0.3),
-    "b": ("rods.b", 1.0),
+    "b": ("rods.b", MATERIAL_DEFAULTS["b"]),
     "L": ("rods.L", 100.0),
     "N": ("rods.N", 1),
     "s": ("rods.s", 10.0),
-    "E_B": ("rods.E_B", 3000.0),
+    "E_B": ("rods.E_B", MATERIAL_DEFAULTS["E_B"]),
     "eps0": ("release.eps0", 0.5),
-    "E": ("fabric.E", 0.45),
-    "t": ("fabric.t", 0.4),
+    "E": ("fabric.E", MATERIAL_DEFAULTS["E"]),
+    "t": ("fabric.t", MATERIAL_DEFAULTS["t"]),
     # records written before the resolved case was stored used the 20 mm default
     "margin_y": ("fabric.margin_y", 20.0),
 }

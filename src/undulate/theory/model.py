@@ -41,6 +41,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..model.config import MATERIAL_DEFAULTS
+
 __all__ = [
     "DEFAULTS",
     "FAMILIES",
@@ -62,7 +64,7 @@ __all__ = [
 
 #: Defaults (those of the case file, docs/config.md) used by every function here: rod width
 #: b [mm], rod modulus E_B [MPa], fabric modulus E [MPa], fabric thickness t [mm].
-DEFAULTS: dict[str, float] = {"b": 1.0, "E_B": 3000.0, "E": 0.45, "t": 0.4}
+DEFAULTS: dict[str, float] = dict(MATERIAL_DEFAULTS)
 
 #: Shape families predicted by :func:`phase_map`, in the order of their integer ``code``.
 FAMILIES: tuple[str, ...] = ("coherent", "independent", "rolls", "bends")
@@ -78,7 +80,7 @@ def _arr(x: ArrayLike) -> NDArray[np.float64]:
     return np.asarray(x, dtype=float)
 
 
-def I_B(h: ArrayLike, b: ArrayLike = 1.0) -> Any:
+def I_B(h: ArrayLike, b: ArrayLike = DEFAULTS["b"]) -> Any:
     """Second moment of area of the rod's rectangular section for out-of-plane bending [mm^4].
 
     ``I_B = h**3 * b / 12`` with ``h`` the thickness (out of plane) and ``b`` the width.
@@ -90,10 +92,10 @@ def l(  # noqa: E743 - the usual name of the arc length
     h: ArrayLike,
     eps0: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """Arc length of one circular segment, eq. (1) of docs/theory.md [mm].
 
@@ -111,10 +113,10 @@ def a(
     h: ArrayLike,
     eps0: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """The **formula** amplitude (docs/theory.md) [mm].
 
@@ -132,10 +134,10 @@ def R(
     h: ArrayLike,
     eps0: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """Radius of one circular segment [mm]: ``R = l / sqrt(24 eps0)``.
 
@@ -149,10 +151,10 @@ def sagitta(
     h: ArrayLike,
     eps0: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """**Exact** height of a circular arc of length :func:`l` and radius :func:`R` [mm].
 
@@ -169,10 +171,10 @@ def s_hat(
     h: ArrayLike,
     eps0: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """Spacing over which the fabric tension relaxes between rods [mm]: ``2 a (1 + eps0)``.
 
@@ -213,10 +215,10 @@ def n(
     eps0: ArrayLike,
     L: ArrayLike,
     *,
-    b: ArrayLike = 1.0,
-    E_B: ArrayLike = 3000.0,
-    E: ArrayLike = 0.45,
-    t: ArrayLike = 0.4,
+    b: ArrayLike = DEFAULTS["b"],
+    E_B: ArrayLike = DEFAULTS["E_B"],
+    E: ArrayLike = DEFAULTS["E"],
+    t: ArrayLike = DEFAULTS["t"],
 ) -> Any:
     """Predicted number of half-waves on a rod of length ``L``: the odd integer nearest ``L/l``.
 
@@ -252,10 +254,10 @@ def phase_map(
     eps0: float = 0.5,
     L: float = 100.0,
     N: int = 5,
-    b: float = 1.0,
-    E_B: float = 3000.0,
-    E: float = 0.45,
-    t: float = 0.4,
+    b: float = DEFAULTS["b"],
+    E_B: float = DEFAULTS["E_B"],
+    E: float = DEFAULTS["E"],
+    t: float = DEFAULTS["t"],
 ) -> dict[str, NDArray[Any]]:
     """Predicted shape family of ``N`` parallel rods at each ``(h, s)`` point.
 
@@ -316,10 +318,10 @@ def predictions(
     L: float = 100.0,
     N: int = 5,
     s: float | None = None,
-    b: float = 1.0,
-    E_B: float = 3000.0,
-    E: float = 0.45,
-    t: float = 0.4,
+    b: float = DEFAULTS["b"],
+    E_B: float = DEFAULTS["E_B"],
+    E: float = DEFAULTS["E"],
+    t: float = DEFAULTS["t"],
 ) -> dict[str, float | int | str]:
     """All scalar predictions for one design, as a JSON-ready dict (used by the CLI).
 
