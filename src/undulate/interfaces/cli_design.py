@@ -1,0 +1,83 @@
+"""``undulate design``: what to print for a wanted wave (analytical inverse, docs/design.md)."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from ..model.config import MATERIAL_DEFAULTS as _MAT
+
+__all__ = ["register"]
+
+
+def design(
+    target: Annotated[list[str], typer.Option(
+        "--target", help="wanted metric KEY=VALUE, repeatable: l, lam, a (mm), n (odd)")],
+    L: Annotated[float, typer.Option("--L", help="line length, mm")] = 100.0,
+    N: Annotated[int, typer.Option("--N", help="parallel rods in the group")] = 1,
+    b: Annotated[float, typer.Option("--b", help="rod width, mm")] = _MAT["b"],
+    eps0: Annotated[float, typer.Option("--eps0", help="pre-stretch, when not free")] = 0.5,
+    eps0_min: Annotated[float | None, typer.Option(
+        "--eps0-min", help="allowed pre-stretch range (with two targets)")] = None,
+    eps0_max: Annotated[float | None, typer.Option("--eps0-max")] = None,
+    h_min: Annotated[float, typer.Option("--h-min", help="thinnest printable rod, mm")] = 0.08,
+    h_max: Annotated[float, typer.Option("--h-max", help="thickest printable rod, mm")] = 2.0,
+    h_step: Annotated[float, typer.Option("--h-step", help="printable thickness step, mm")]
+    = 0.02,
+    h_tol: Annotated[float, typer.Option("--h-tol", help="printer's thickness tolerance, mm")]
+    = 0.02,
+    s: Annotated[float | None, typer.Option("--s", help="gap between rods, if fixed, mm")]
+    = None,
+    s_min: Annotated[float, typer.Option("--s-min", help="smallest allowed gap, mm")] = 0.0,
+    s_max: Annotated[float, typer.Option("--s-max", help="largest allowed gap, mm")] = 50.0,
+    phase: Annotated[str | None, typer.Option(
+        "--phase", help="coherent or independent (N >= 2)")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
+) -> None:
+    """Printable h (and s, eps0) for a wanted arc length, wavelength, amplitude or n.
+
+    Inverts the analytical model (eq. (1), the amplitude formula, the odd-n rule, s_hat and
+    bundling); h is rounded to --h-step and the metrics are given for the rounded value,
+    with how far they move for +- --h-tol. Example: undulate design --target l=20 --L 100
+    """
+    from ..design import Constraints, DesignError, inverse, parse_targets
+
+    try:
+        targets = parse_targets(target)
+        c = Constraints(L=L, N=N, b=b, h_min=h_min, h_max=h_max, h_step=h_step, h_tol=h_tol,
+                        eps0=eps0, eps0_min=eps0_min, eps0_max=eps0_max, s=s, s_min=s_min,
+                        s_max=s_max, phase=phase)
+        d = inverse(targets, c)
+    except DesignError as err:
+        typer.echo(f"Error: {err}", err=True)
+        raise typer.Exit(code=2) from None
+    if as_json:
+        typer.echo(json.dumps(d.to_dict(), indent=2))
+        return
+    con = Console()
+    p = d.predicted
+    con.print(f"print: h = {d.h:g} mm, b = {d.b:g} mm, line length L = {d.L:g} mm, "
+              f"stretch eps0 = {d.eps0:.4g}"
+              + (f", N = {d.N} rods at gap s = {d.s:.4g} mm" if d.N > 1 else ""))
+    table = Table(title="predicted (analytical model)")
+    for col in ("metric", "target", "predicted", f"h - {h_tol:g}",
+                f"h + {h_tol:g}"):
+        table.add_column(col)
+    for k in ("l", "lam", "a", "n"):
+        tgt = d.targets.get(k)
+        sen = d.sensitivity[k]
+        table.add_row(k, "" if tgt is None else f"{tgt:g}", f"{p[k]:.4g}",
+                      f"{sen['h_minus_tol']:.4g}", f"{sen['h_plus_tol']:.4g}")
+    table.add_row("family", str(d.targets.get("phase", "")), str(p["family"]), "", "")
+    con.print(table)
+    for note in d.notes:
+        con.print(f"note: {note}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``design`` command to ``app``."""
+    app.command("design")(design)
