@@ -31,6 +31,11 @@ dx_far = 4.0
 """
 
 
+def _gcode_args(d: Path, *opts: str) -> list[str]:
+    (d / "case.toml").write_text(TINY)
+    return ["gcode", "case.toml", "--out", "case.gcode", *opts]
+
+
 @dataclass(frozen=True)
 class ErrorCase:
     id: str
@@ -242,6 +247,13 @@ CASES: list[ErrorCase] = [
               "`UNDULATE_PARDISO_THREADS=0`", lambda d: ["theory", "--h", "0.3"],
               ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
               env=(("UNDULATE_PARDISO_THREADS", "0"),)),
+    # ---- gcode --------------------------------------------------------------------------
+    ErrorCase("gcode-bed", "Print files (`undulate gcode`)", "a bed too small for the lines",
+              lambda d: _gcode_args(d, "--bed-x", "15"), ("outside the 15 x 220 mm bed",)),
+    ErrorCase("gcode-nozzle", "Print files (`undulate gcode`)", "`--nozzle -1`",
+              lambda d: _gcode_args(d, "--nozzle", "-1"), ("nozzle: must be a number > 0",)),
+    ErrorCase("gcode-width", "Print files (`undulate gcode`)", "rods narrower than the nozzle",
+              lambda d: _gcode_args(d, "--nozzle", "1.5"), ("cannot be laid in passes",)),
     # ---- design -------------------------------------------------------------------------
     ErrorCase("design-key", "Inverse design (`undulate design`)", "`--target x=3`",
               lambda d: ["design", "--target", "x=3"], ("unknown key 'x'", "l, lam, a, n")),

@@ -5,6 +5,7 @@
     undulate analyse DIR             shape analysis of a run directory (docs/analysis.md)
     undulate theory --h 0.5          analytical model (docs/theory.md)
     undulate design --target l=20    what to print for a wanted wave (docs/design.md)
+    undulate gcode CASE.toml --out F G-code that prints the case's lines (docs/fabrication.md)
     undulate study run PRESET ...    parametric studies (docs/studies.md)
 
 Every refused input is one line on stderr naming the file, field or option, exit code 2;
@@ -161,10 +162,12 @@ def run(
 def _register_subcommands() -> None:
     from .cli_analysis import register as register_analysis
     from .cli_design import register as register_design
+    from .cli_fabrication import register as register_fabrication
     from .cli_study import study_app
 
     register_analysis(app)
     register_design(app)
+    register_fabrication(app)
     app.add_typer(study_app, name="study")
 
 

@@ -1,0 +1,10 @@
+"""Fabrication: print files for the lines of a case (docs/fabrication.md).
+
+:func:`gcode.write_gcode` turns a case's rods into G-code for an FDM printer that prints them
+on the fabric clamped stretched on the bed.
+"""
+
+from .gcode import GcodeError, PrintLine, PrintSettings, lines_of_case, make_gcode, preview_png
+
+__all__ = ["GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
+           "preview_png"]

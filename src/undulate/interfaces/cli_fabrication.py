@@ -1,0 +1,77 @@
+"""``undulate gcode``: print files for a case's lines (docs/fabrication.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+__all__ = ["register"]
+
+
+def gcode(
+    config: Annotated[Path, typer.Argument(help="case description (TOML)")],
+    out: Annotated[Path, typer.Option("--out", help="G-code file to write")],
+    preview: Annotated[Path | None, typer.Option(
+        "--preview", help="also write a PNG top view of the toolpaths")] = None,
+    bed_x: Annotated[float, typer.Option("--bed-x", help="bed size along X, mm")] = 220.0,
+    bed_y: Annotated[float, typer.Option("--bed-y", help="bed size along Y, mm")] = 220.0,
+    origin_x: Annotated[float | None, typer.Option(
+        "--origin-x", help="bed X of the fabric centre, mm (default: bed centre)")] = None,
+    origin_y: Annotated[float | None, typer.Option("--origin-y", help="bed Y of it, mm")]
+    = None,
+    nozzle: Annotated[float, typer.Option("--nozzle", help="nozzle diameter, mm")] = 0.4,
+    filament: Annotated[float, typer.Option("--filament", help="filament diameter, mm")]
+    = 1.75,
+    fabric_z: Annotated[float | None, typer.Option(
+        "--fabric-z", help="height of the fabric's top above the bed, mm (default: t)")]
+    = None,
+    print_speed: Annotated[float, typer.Option("--print-speed", help="mm/s")] = 20.0,
+    travel_speed: Annotated[float, typer.Option("--travel-speed", help="mm/s")] = 120.0,
+    nozzle_temp: Annotated[float, typer.Option("--nozzle-temp", help="degrees C")] = 210.0,
+    bed_temp: Annotated[float, typer.Option("--bed-temp", help="degrees C")] = 60.0,
+) -> None:
+    """G-code that prints the case's lines on the fabric clamped stretched on the bed.
+
+    Layers and passes give the rods' thickness h and width b; travel moves keep clear of
+    printed lines; the header says how far to stretch the fabric. Example:
+    undulate gcode examples/single_rod.toml --out rod.gcode --preview rod.png
+    """
+    from ..fabrication import GcodeError, PrintSettings, lines_of_case, make_gcode, preview_png
+    from ..model import ConfigError, load_case
+    from .cli import _fail
+
+    try:
+        case = load_case(config)
+    except ConfigError as err:
+        line = (str(err).splitlines() or ["invalid case"])[0]
+        raise _fail(line if line.startswith(str(config)) else f"{config}: {line}") from None
+    if (origin_x is None) != (origin_y is None):
+        raise _fail("--origin-x, --origin-y: give both or neither")
+    st = PrintSettings(bed_x=bed_x, bed_y=bed_y, nozzle=nozzle, filament=filament,
+                       origin=None if origin_x is None else (origin_x, origin_y),
+                       fabric_z=fabric_z, print_speed=print_speed, travel_speed=travel_speed,
+                       nozzle_temp=nozzle_temp, bed_temp=bed_temp)
+    try:
+        text, plan = make_gcode(lines_of_case(case), st, eps0=case.release.eps0,
+                                fabric_t=case.fabric.t, name=case.name,
+                                fabric_extent=case.fabric_extent())
+    except GcodeError as err:
+        raise _fail(str(err)) from None
+    try:
+        out.write_text(text)
+        if preview is not None:
+            preview_png(plan, preview, title=f"{case.name}: toolpaths on the bed")
+    except OSError as err:
+        raise _fail(f"--out {out}: cannot write ({err.strerror or err})") from None
+    n_print = sum(m.kind == "print" for m in plan.moves)
+    typer.echo(f"wrote {out}: {len(lines_of_case(case))} line(s), {plan.layers} layer(s) of "
+               f"{plan.layer_height:.4g} mm, {n_print} printed moves; stretch the fabric by "
+               f"eps0 = {case.release.eps0:g} along X before printing"
+               + (f"; preview {preview}" if preview else ""))
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``gcode`` command to ``app``."""
+    app.command("gcode")(gcode)

@@ -1,0 +1,131 @@
+"""G-code of a case's lines, parsed back: paths, extrusion, travel, bed (docs/fabrication.md)."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from undulate.fabrication import GcodeError, PrintSettings, lines_of_case, make_gcode
+from undulate.fabrication.gcode import PrintLine
+from undulate.interfaces.cli import app
+from undulate.model import case_from_dict
+
+WORD = re.compile(r"([GXYZEF])(-?\d+(?:\.\d*)?)")
+
+
+def parse(text: str) -> list[dict]:
+    """Moves of absolute G0/G1 code: from, to, z, filament fed, G0 or G1."""
+    x = y = z = e = 0.0
+    moves = []
+    for raw in text.splitlines():
+        code = raw.split(";", 1)[0].strip()
+        if not code.startswith(("G0", "G1")):
+            assert not code.startswith(("G91", "M83")), raw  # absolute only
+            continue
+        w = {k: float(v) for k, v in WORD.findall(code)}
+        nx, ny, nz, ne = w.get("X", x), w.get("Y", y), w.get("Z", z), w.get("E", e)
+        moves.append(dict(g=int(w["G"]), p0=(x, y), p1=(nx, ny), z=nz, de=ne - e))
+        x, y, z, e = nx, ny, nz, ne
+    return moves
+
+
+def _seg_dist(p, a, b):
+    a, b, p = np.asarray(a), np.asarray(b), np.asarray(p)
+    t = np.clip(np.dot(p - a, b - a) / max(np.dot(b - a, b - a), 1e-300), 0, 1)
+    return float(np.linalg.norm(p - (a + t * (b - a))))
+
+
+CASE = {"rods": {"h": 0.3, "N": 5, "s": 5.0, "L": 60.0}, "release": {"eps0": 0.5}}
+
+
+def _gcode(case_dict=CASE, **kw):
+    case = case_from_dict(case_dict)
+    lines = lines_of_case(case)
+    text, plan = make_gcode(lines, PrintSettings(**kw), eps0=case.release.eps0,
+                            fabric_t=case.fabric.t, fabric_extent=case.fabric_extent())
+    return case, lines, text, plan
+
+
+def test_printed_paths_equal_the_lines_layers_and_passes():
+    case, lines, text, plan = _gcode()
+    mv = parse(text)
+    prints = [m for m in mv if m["g"] == 1 and m["p0"] != m["p1"]]
+    assert all(m["de"] > 0 for m in prints)
+    assert plan.layers == 1 and plan.layer_height == pytest.approx(0.3)  # 0.3 <= 0.75 x 0.4
+    # b = 1 mm as two passes of 0.5 mm at y +- 0.25 of each line, shifted to the bed centre
+    total = sum(math.dist(m["p0"], m["p1"]) for m in prints)
+    assert total == pytest.approx(sum(ln.length for ln in lines) * 2 * plan.layers, rel=1e-6)
+    for ln in lines:
+        yc = ln.points[0, 1] + 110.0
+        ys = sorted({round(m["p0"][1], 3) for m in prints if abs(m["p0"][1] - yc) < 0.6})
+        assert ys == pytest.approx([yc - 0.25, yc + 0.25], abs=1e-3)
+        xs = [c for m in prints if abs(m["p0"][1] - yc) < 0.6 for c in (m["p0"][0], m["p1"][0])]
+        assert min(xs) == pytest.approx(ln.points[0, 0] + 110.0, abs=1e-3)
+        assert max(xs) == pytest.approx(ln.points[-1, 0] + 110.0, abs=1e-3)
+    # first layer a layer height above the fabric's top (t = 0.4 mm)
+    assert {round(m["z"], 4) for m in prints} == {round(0.4 + 0.3, 4)}
+    assert "stretched along X by eps0 = 0.5" in text.replace("STRETCHED", "stretched")
+
+
+def test_extrusion_per_mm_is_width_times_layer_over_filament_area():
+    _, _, text, plan = _gcode({**CASE, "rods": {**CASE["rods"], "h": 0.5}})
+    assert plan.layers == 2 and plan.layer_height == pytest.approx(0.25)
+    area = math.pi * 1.75**2 / 4
+    for m in parse(text):
+        if m["g"] == 1 and m["p0"] != m["p1"]:
+            per_mm = m["de"] / math.dist(m["p0"], m["p1"])
+            assert per_mm == pytest.approx(0.5 * 0.25 / area, rel=1e-3)  # one pass: b/2 wide
+
+
+@pytest.mark.parametrize("case_dict", [
+    CASE,
+    {"rods": {"h": 0.3, "b": 1.0, "segments": [
+        {"start": [-40.0, 0.0], "length": 30.0}, {"start": [5.0, 0.0], "length": 30.0},
+        {"start": [-20.0, 6.0], "length": 50.0}, {"start": [-30.0, -6.0], "length": 20.0}]}},
+])
+def test_travel_never_crosses_a_printed_line_and_stays_on_the_bed(case_dict):
+    case, lines, text, plan = _gcode(case_dict)
+    mv = parse(text)
+    segs = [(ln.points[0] + 110.0, ln.points[-1] + 110.0, ln.b) for ln in lines]
+    travels = [m for m in mv if m["g"] == 0 and m["p0"] != m["p1"]][1:]  # not the first
+    assert travels
+    for m in travels:
+        a, b = np.array(m["p0"]), np.array(m["p1"])
+        for t in np.linspace(0, 1, 200):
+            p = a + t * (b - a)
+            for s0, s1, width in segs:
+                d = _seg_dist(p, s0, s1)
+                near_end = min(np.linalg.norm(p - a), np.linalg.norm(p - b)) <= width
+                assert d > width / 2 or near_end, (m, p)
+    for m in mv:
+        for x, y in (m["p0"], m["p1"]):
+            assert 0 <= x <= 220 and 0 <= y <= 220
+
+
+def test_bad_prints_raise_one_clear_error():
+    line = PrintLine(0, np.array([[0.0, 0.0], [10.0, 0.0]]), 0.3, 0.1)
+    with pytest.raises(GcodeError, match="cannot be laid in passes"):
+        make_gcode([line], eps0=0.5, fabric_t=0.4)
+    thin = PrintLine(0, np.array([[0.0, 0.0], [10.0, 0.0]]), 0.02, 1.0)
+    with pytest.raises(GcodeError, match="thinner than the thinnest layer"):
+        make_gcode([thin], eps0=0.5, fabric_t=0.4)
+    with pytest.raises(GcodeError, match="outside the 50 x 50 mm bed"):
+        _gcode(bed_x=50.0, bed_y=50.0)
+    with pytest.raises(GcodeError, match="nozzle: must be a number > 0"):
+        _gcode(nozzle=-1.0)
+
+
+def test_cli_writes_gcode_and_preview(tmp_path: Path):
+    case = tmp_path / "five.toml"
+    case.write_text('[rods]\nh = 0.4\nN = 5\ns = 10.0\nL = 60.0\n')
+    out, png = tmp_path / "five.gcode", tmp_path / "five.png"
+    res = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--preview", str(png)])
+    assert res.exit_code == 0, res.output
+    assert parse(out.read_text()) and png.stat().st_size > 5000
+    bad = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--bed-x", "30"])
+    assert bad.exit_code == 2 and "bed" in bad.stderr and "Traceback" not in bad.stderr
