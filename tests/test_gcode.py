@@ -129,3 +129,41 @@ def test_cli_writes_gcode_and_preview(tmp_path: Path):
     assert parse(out.read_text()) and png.stat().st_size > 5000
     bad = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--bed-x", "30"])
     assert bad.exit_code == 2 and "bed" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_drawings_in_the_print_and_relaxed_frames(tmp_path: Path):
+    import xml.etree.ElementTree as ET
+
+    import ezdxf
+
+    from undulate.fabrication.drawing import write_drawing
+    from undulate.mechanics.build import lateral_stretch
+
+    case = case_from_dict(CASE)
+    lines = lines_of_case(case)
+    lam_y = lateral_stretch(0.5, case.fabric.nu)
+    for ext in (".svg", ".dxf"):
+        printed, relaxed = write_drawing(lines, tmp_path / f"lines{ext}", eps0=0.5,
+                                         nu=case.fabric.nu)
+        assert relaxed.name == f"lines-relaxed{ext}"
+        for path, sx, sy in ((printed, 1.0, 1.0), (relaxed, 1 / 1.5, 1 / lam_y)):
+            if ext == ".svg":
+                ns = {"s": "http://www.w3.org/2000/svg"}
+                polys = ET.parse(path).getroot().findall(".//s:polyline", ns)
+                pts = [np.array([[float(v) for v in c.split(",")]
+                                 for c in p.get("points").split()]) for p in polys]
+                # SVG: shifted and y flipped; compare lengths and the gaps between lines
+                assert [math.dist(*p) for p in pts] == pytest.approx(
+                    [ln.length * sx for ln in lines], abs=2e-4)
+                ys = sorted(p[0, 1] for p in pts)
+                want = sorted(ln.points[0, 1] * sy for ln in lines)
+                assert np.diff(ys) == pytest.approx(np.diff(want), abs=2e-4)  # 4 decimals
+                assert float(polys[0].get("stroke-width")) == pytest.approx(1.0 * sy, abs=1e-4)
+            else:
+                msp = ezdxf.readfile(path).modelspace()
+                got = sorted([tuple(np.round(np.array(e.get_points("xy")), 6).ravel())
+                              for e in msp.query("LWPOLYLINE[layer=='LINES']")])
+                want = sorted([tuple(np.round(ln.points * [sx, sy], 6).ravel())
+                               for ln in lines])
+                assert np.array(got) == pytest.approx(np.array(want))
+                assert len(msp.query("LWPOLYLINE[layer=='FOOTPRINTS']")) == len(lines)

@@ -15,6 +15,9 @@ def gcode(
     out: Annotated[Path, typer.Option("--out", help="G-code file to write")],
     preview: Annotated[Path | None, typer.Option(
         "--preview", help="also write a PNG top view of the toolpaths")] = None,
+    drawing: Annotated[Path | None, typer.Option(
+        "--drawing", help="also draw the lines (.svg or .dxf): this file in the print frame, "
+        "NAME-relaxed.EXT in the relaxed fabric's frame")] = None,
     bed_x: Annotated[float, typer.Option("--bed-x", help="bed size along X, mm")] = 220.0,
     bed_y: Annotated[float, typer.Option("--bed-y", help="bed size along Y, mm")] = 220.0,
     origin_x: Annotated[float | None, typer.Option(
@@ -39,6 +42,7 @@ def gcode(
     undulate gcode examples/single_rod.toml --out rod.gcode --preview rod.png
     """
     from ..fabrication import GcodeError, PrintSettings, lines_of_case, make_gcode, preview_png
+    from ..fabrication.drawing import write_drawing
     from ..model import ConfigError, load_case
     from .cli import _fail
 
@@ -59,17 +63,24 @@ def gcode(
                                 fabric_extent=case.fabric_extent())
     except GcodeError as err:
         raise _fail(str(err)) from None
+    if drawing is not None and drawing.suffix.lower() not in (".svg", ".dxf"):
+        raise _fail(f"--drawing {drawing}: must end in .svg or .dxf")
+    drawn: list[Path] = []
     try:
         out.write_text(text)
         if preview is not None:
             preview_png(plan, preview, title=f"{case.name}: toolpaths on the bed")
+        if drawing is not None:
+            drawn = write_drawing(lines_of_case(case), drawing, eps0=case.release.eps0,
+                                  nu=case.fabric.nu, name=case.name)
     except OSError as err:
-        raise _fail(f"--out {out}: cannot write ({err.strerror or err})") from None
+        raise _fail(f"cannot write {err.filename or out} ({err.strerror or err})") from None
     n_print = sum(m.kind == "print" for m in plan.moves)
     typer.echo(f"wrote {out}: {len(lines_of_case(case))} line(s), {plan.layers} layer(s) of "
                f"{plan.layer_height:.4g} mm, {n_print} printed moves; stretch the fabric by "
                f"eps0 = {case.release.eps0:g} along X before printing"
-               + (f"; preview {preview}" if preview else ""))
+               + (f"; preview {preview}" if preview else "")
+               + (f"; drawings {', '.join(map(str, drawn))}" if drawn else ""))
 
 
 def register(app: typer.Typer) -> None:
