@@ -54,7 +54,7 @@ def test_theory_functions_match_spec() -> None:
 def test_single_rod_figures_and_fits(single_h: Path) -> None:
     text = write_report(single_h).read_text()  # makes the figures too
     made = sorted(p.name for p in (single_h / "figures").iterdir())
-    assert made == [f"{n}.{e}" for n in ("quantized_flattening", "single_rod_h")
+    assert made == [f"{n}.{e}" for n in ("onset", "quantized_flattening", "single_rod_h")
                     for e in ("pdf", "png")]
     assert all(p.stat().st_size > 1000 for p in (single_h / "figures").iterdir())
     assert "eq. (1) slope" in text and "Arcs vs sines" in text and "Bundling" not in text

@@ -123,6 +123,36 @@ def fig_single_rod_h(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
     return _save(fig, outdir, "single_rod_h")
 
 
+def fig_onset(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
+    """Onset of buckling vs h (single rods, per eps0): the release strain where the rod
+    first stands out of its printed level by h (mean +- std over seeds), and the first
+    release step that needed negative curvature."""
+    d = ok_rows(df)
+    if (d.empty or not is_swept(d, "h") or is_swept(d, "s") or "onset_release_strain" not in d
+            or d["h"].nunique() < MIN_H_VALUES):
+        return None
+    cols = ["onset_release_strain", "onset_negative_curvature_release_strain"]
+    pts = per_point(d, ["eps0", "h"], cols)
+    if pts["onset_release_strain"].notna().sum() == 0:
+        return None
+    fig = Figure(figsize=(6.5, 4.5), layout="constrained")
+    ax = fig.subplots()
+    for (eps0, g), color in zip(pts.groupby("eps0"), _cycle(), strict=False):
+        ax.errorbar(g["h"], g["onset_release_strain"], yerr=g.get("onset_release_strain_sd"),
+                    fmt="o", ms=3, color=color,
+                    label=f"deflection > h (interpolated), ε0={eps0:g}")
+        if cols[1] in g and g[cols[1]].notna().any():
+            ax.plot(g["h"], g[cols[1]], "s", ms=3, mfc="none", color=color, alpha=0.6,
+                    label=f"first negative-curvature step, ε0={eps0:g}")
+    ax.set_xlabel("rod thickness h [mm]")
+    ax.set_ylabel("release strain at the onset [-]")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title("Onset of buckling")
+    return _save(fig, outdir, "onset")
+
+
 def _cycle() -> Any:
     import itertools
 
@@ -298,6 +328,7 @@ FIGURES = {
     "phase_diagram": fig_phase_diagram,
     "master_curve": fig_master_curve,
     "quantized_flattening": fig_quantized_flattening,
+    "onset": fig_onset,
 }
 
 
