@@ -126,6 +126,7 @@ class Design:
     sensitivity: dict[str, dict[str, float]]
     notes: list[str] = field(default_factory=list)
     model: str = "analytical (undulate.theory)"
+    h_step: float = 0.02
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
@@ -290,7 +291,8 @@ def inverse(targets: dict[str, float], constraints: Constraints | None = None, *
     sens = _sensitivity(h, eps0, c)
     return Design(h=h, h_exact=h_exact, s=pred["s"], eps0=eps0, b=c.b, L=c.L, N=c.N,
                   targets={**targets, **({"phase": c.phase} if c.phase else {})},
-                  predicted=pred, predicted_exact=pred_exact, sensitivity=sens, notes=notes)
+                  predicted=pred, predicted_exact=pred_exact, sensitivity=sens, notes=notes,
+                  h_step=c.h_step)
 
 
 def _solve_eps0(targets: dict[str, float], c: Constraints) -> float:

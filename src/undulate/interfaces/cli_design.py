@@ -36,6 +36,12 @@ def design(
     s_max: Annotated[float, typer.Option("--s-max", help="largest allowed gap, mm")] = 50.0,
     phase: Annotated[str | None, typer.Option(
         "--phase", help="coherent or independent (N >= 2)")] = None,
+    do_refine: Annotated[bool, typer.Option(
+        "--refine", help="correct h with simulations (the real engine, seconds to minutes "
+        "each)")] = False,
+    max_sims: Annotated[int, typer.Option("--max-sims", help="simulations for --refine")] = 4,
+    tol: Annotated[float, typer.Option(
+        "--tol", help="relative tolerance on the target for --refine")] = 0.03,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
 ) -> None:
     """Printable h (and s, eps0) for a wanted arc length, wavelength, amplitude or n.
@@ -44,7 +50,7 @@ def design(
     bundling); h is rounded to --h-step and the metrics are given for the rounded value,
     with how far they move for +- --h-tol. Example: undulate design --target l=20 --L 100
     """
-    from ..design import Constraints, DesignError, inverse, parse_targets
+    from ..design import Constraints, DesignError, inverse, parse_targets, refine
 
     try:
         targets = parse_targets(target)
@@ -52,11 +58,26 @@ def design(
                         eps0=eps0, eps0_min=eps0_min, eps0_max=eps0_max, s=s, s_min=s_min,
                         s_max=s_max, phase=phase)
         d = inverse(targets, c)
+        if do_refine and (max_sims < 1 or not 0 < tol < 1):
+            raise DesignError("--max-sims, --tol: need --max-sims >= 1 and 0 < --tol < 1")
     except DesignError as err:
         typer.echo(f"Error: {err}", err=True)
         raise typer.Exit(code=2) from None
+    refined = None
+    if do_refine:
+        from ..solve.newton import ConvergenceError
+
+        try:
+            refined = refine(d, tol=tol, max_sims=max_sims,
+                             progress=lambda text: typer.echo(f"refine: {text}", err=True))
+        except ConvergenceError as err:
+            typer.echo(f"Error: refine: no equilibrium found: {err}", err=True)
+            raise typer.Exit(code=3) from None
     if as_json:
-        typer.echo(json.dumps(d.to_dict(), indent=2))
+        out = d.to_dict()
+        if refined is not None:
+            out["refined"] = {k: v for k, v in refined.to_dict().items() if k != "design"}
+        typer.echo(json.dumps(out, indent=2))
         return
     con = Console()
     p = d.predicted
@@ -76,6 +97,17 @@ def design(
     con.print(table)
     for note in d.notes:
         con.print(f"note: {note}")
+    if refined is not None:
+        r = refined
+        t2 = Table(title=f"refined with {len(r.history)} simulation(s): h = {r.h:g} mm "
+                         f"({r.reason})")
+        for col in ("metric", "target", "model at h", "simulated at h"):
+            t2.add_column(col)
+        for k in ("l", "lam", "a", "n"):
+            tgt = d.targets.get(k)
+            t2.add_row(k, "" if tgt is None else f"{tgt:g}", f"{r.predicted[k]:.4g}",
+                       f"{r.simulated[k]:.4g}")
+        con.print(t2)
 
 
 def register(app: typer.Typer) -> None:
