@@ -162,6 +162,9 @@ def test_collect_table(tmp_path: Path) -> None:
     # each record keeps the validated case with every default, and the table reads it
     rec = json.loads(next((tmp_path / "runs").glob("*.json")).read_text())
     assert rec["case_resolved"]["fabric"]["margin_y"] == pytest.approx(df["margin_y"].iloc[0])
+    # the sheet and the mesh of each run: the quick variant's coarser mesh
+    assert (df["dx_rod"] == 2.0).all() and (df["dx_far"] == 6.0).all()
+    assert (df["mesh_kind"] == "unstructured").all() and (df["margin_x"] > 0).all()
     assert rec["case_resolved"]["solver"]["max_iter"] >= 1 and rec["version"]
 
 

@@ -85,7 +85,7 @@ def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
     rec["n"] = int(round(rec.get("n_median") or 0))
     rec["n_mode"] = max(set(ns), key=ns.count) if ns else None
     rec["n_mean"] = sum(ns) / len(ns) if ns else None
-    for key in ("l", "lam", "a", "R", "n", "r2_arcs", "r2_sine", "quality"):
+    for key in ("l", "l_segments", "lam", "a", "R", "n", "r2_arcs", "r2_sine", "quality"):
         rec[f"rods_{key}"] = json.dumps([r.get(key) for r in ana["rods"]])
     rec["coherence"] = json.dumps(ana.get("coherence"))
     rec.update(onset(result))

@@ -28,7 +28,7 @@ from typing import Any
 import pandas as pd
 
 from ..fileio import atomic_path, current_umask, default_mode  # noqa: F401 (re-exported)
-from ..model.config import MATERIAL_DEFAULTS
+from ..model.config import MATERIAL_DEFAULTS, Fabric, MeshOptions
 from .spec import get_path
 
 __all__ = [
@@ -65,6 +65,11 @@ PARAM_ALIASES: dict[str, tuple[str, Any]] = {
     "t": ("fabric.t", MATERIAL_DEFAULTS["t"]),
     # records written before the resolved case was stored used the 20 mm default
     "margin_y": ("fabric.margin_y", 20.0),
+    # the sheet and the mesh (defaults: those of the case file)
+    "margin_x": ("fabric.margin_x", Fabric.model_fields["margin_x"].default),
+    "mesh_kind": ("mesh.kind", MeshOptions.model_fields["kind"].default),
+    "dx_rod": ("mesh.dx_rod", MeshOptions.model_fields["dx_rod"].default),
+    "dx_far": ("mesh.dx_far", MeshOptions.model_fields["dx_far"].default),
 }
 
 
