@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .. import theory as th
-from ..model.config import MATERIAL_DEFAULTS
+from ..model.config import MATERIAL_DEFAULTS, number_problem
 
 __all__ = ["TARGET_KEYS", "Constraints", "Design", "DesignError", "forward", "inverse",
            "parse_targets"]
@@ -82,8 +82,8 @@ class Constraints:
                "h_step": self.h_step, "eps0": self.eps0, "E_B": self.E_B, "E": self.E,
                "t": self.t}
         for k, v in pos.items():
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise DesignError(f"{k}: must be a number > 0 (got {v!r})")
+            if (msg := number_problem(k, v)) is not None:
+                raise DesignError(msg)
         if self.h_tol < 0:
             raise DesignError(f"h_tol: must be >= 0 (got {self.h_tol!r})")
         if self.h_max < self.h_min:

@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from ..model.config import number_problem
+
 __all__ = ["GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
            "preview_png", "Move"]
 
@@ -75,13 +77,11 @@ class PrintSettings:
         positive = ("bed_x", "bed_y", "nozzle", "filament", "layer_max", "layer_min",
                     "width_min", "width_max", "print_speed", "travel_speed", "clearance")
         for k in positive:
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise GcodeError(f"{k}: must be a number > 0 (got {v!r})")
+            if (msg := number_problem(k, getattr(self, k))) is not None:
+                raise GcodeError(msg)
         for k in ("z_hop", "retract", "nozzle_temp", "bed_temp"):
-            v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise GcodeError(f"{k}: must be a number >= 0 (got {v!r})")
+            if (msg := number_problem(k, getattr(self, k), inclusive=True)) is not None:
+                raise GcodeError(msg)
         if self.nozzle_temp > 350 or self.bed_temp > 150:
             raise GcodeError("nozzle_temp, bed_temp: must be <= 350 and <= 150 degrees C")
         if self.width_min >= self.width_max:

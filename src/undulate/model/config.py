@@ -39,6 +39,7 @@ __all__ = [
     "case_from_dict",
     "allowed_range",
     "check_value",
+    "number_problem",
 ]
 
 
@@ -475,6 +476,18 @@ def check_value(model: type[BaseModel], name: str, value: object, label: str) ->
         raise ConfigError(
             f"{label}: {msg}" + (f" (allowed: {rng})" if rng else "") + f"; got {value!r}"
         ) from None
+
+
+def number_problem(name: str, value: object, *, above: float = 0.0,
+                   inclusive: bool = False) -> str | None:
+    """``None`` if ``value`` is a finite number > ``above`` (>= with ``inclusive``), else the
+    one-line message ``"name: must be a number > above (got value)"``. Shared by the options
+    checks of design, fabrication and patterns, each raising its own error type."""
+    ok = (isinstance(value, int | float) and not isinstance(value, bool)
+          and math.isfinite(value) and (value >= above if inclusive else value > above))
+    if ok:
+        return None
+    return f"{name}: must be a number {'>=' if inclusive else '>'} {above:g} (got {value!r})"
 
 
 def _default(model: type[BaseModel], name: str) -> Any:
