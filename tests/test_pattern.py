@@ -1,0 +1,121 @@
+"""Line patterns: SVG and DXF import (units, curves, flips) and the checks' clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from undulate.model.pattern import (
+    PatternError,
+    check_lines,
+    line_from_points,
+    read_dxf,
+    read_pattern,
+    read_svg,
+)
+from undulate.theory.lines import eps_along, predict_lines
+
+
+def test_svg_units_curves_and_transforms(tmp_path: Path) -> None:
+    svg = ('<svg xmlns="http://www.w3.org/2000/svg" width="10cm" height="5cm" '
+           'viewBox="0 0 200 100">'  # 2 user units per mm
+           '<line id="a" x1="0" y1="0" x2="100" y2="0"/>'
+           '<path id="arc" d="M 0 60 A 50 50 0 0 1 100 60"/>'
+           '<g transform="rotate(90 150 50)"><polyline id="p" points="100,50 200,50"/></g>'
+           '</svg>')
+    f = tmp_path / "p.svg"
+    f.write_text(svg)
+    lines = read_pattern(f)
+    by = {ln.id: ln for ln in lines}
+    assert by["a"].length == pytest.approx(50.0, rel=1e-6)
+    assert by["a"].is_straight() and by["a"].angle_deg == pytest.approx(0.0)
+    # half circle of radius 25 mm, sampled every 0.5 mm or finer
+    assert by["arc"].length == pytest.approx(np.pi * 25.0, rel=2e-3)
+    assert len(by["arc"].points) >= 150 and not by["arc"].is_straight()
+    assert by["p"].length == pytest.approx(50.0, rel=1e-6)
+    assert abs(by["p"].angle_deg) == pytest.approx(90.0)
+    # y up: the arc bulges to -y in SVG coordinates, i.e. up on the fabric
+    arc = by["arc"].points
+    assert arc[:, 1].max() > arc[0, 1] + 20.0
+    # centred on the bounding box
+    allp = np.vstack([ln.points for ln in lines])
+    assert np.allclose(allp.min(axis=0) + allp.max(axis=0), 0.0, atol=1e-9)
+    assert read_svg(svg, scale=2.0)[0].length == pytest.approx(100.0, rel=1e-6)
+
+
+@pytest.mark.parametrize(("svg", "needle"), [
+    ('<circle id="c" cx="5" cy="5" r="2"/>', "line c: a closed circle"),
+    ('<path id="z" d="M0 0 L 10 0 L 10 10 Z"/>', "line z: a closed path"),
+    ('<text x="0" y="0">hi</text>', "holds no lines"),
+])
+def test_svg_refusals(svg: str, needle: str) -> None:
+    with pytest.raises(PatternError, match=needle):
+        read_svg(f'<svg xmlns="http://www.w3.org/2000/svg">{svg}</svg>')
+
+
+def test_dxf_lines_arcs_and_units(tmp_path: Path) -> None:
+    import ezdxf
+
+    doc = ezdxf.new()
+    doc.header["$INSUNITS"] = 5  # cm
+    msp = doc.modelspace()
+    msp.add_line((0, 0), (10, 0))
+    msp.add_lwpolyline([(0, 2), (5, 2), (10, 3)])
+    msp.add_arc((5, 10), radius=2, start_angle=0, end_angle=180)
+    path = tmp_path / "p.dxf"
+    doc.saveas(path)
+    lines = read_dxf(path)
+    assert [round(ln.length, 3) for ln in lines[:1]] == [100.0]
+    assert lines[1].length == pytest.approx(50.0 + np.hypot(50.0, 10.0), rel=1e-9)
+    assert lines[2].length == pytest.approx(np.pi * 20.0, rel=2e-3)
+    closed = ezdxf.new()
+    closed.modelspace().add_lwpolyline([(0, 0), (1, 0), (1, 1)], close=True)
+    closed.saveas(tmp_path / "c.dxf")
+    with pytest.raises(PatternError, match="closed lwpolyline"):
+        read_dxf(tmp_path / "c.dxf")
+    with pytest.raises(PatternError, match="unknown kind .png"):
+        read_pattern(tmp_path / "x.png")
+
+
+def test_checks_name_the_lines_and_the_point() -> None:
+    a = line_from_points([[-10, 0], [10, 0]], 0)
+    zig = line_from_points([[0, 5], [10, 5], [10, 10], [5, 10], [5, 0]], 1)
+    with pytest.raises(PatternError, match=r"line 1: crosses itself at \(5, 5\)"):
+        check_lines([zig])
+    near = line_from_points([[-10, 3], [10, 3]], 1)
+    check_lines([a, near], b=1.0)
+    with pytest.raises(PatternError, match="below the minimum gap 5 mm"):
+        check_lines([a, near], b=1.0, min_gap=5.0)
+    with pytest.raises(PatternError, match="line 0: leaves the fabric"):
+        check_lines([a], bounds=(-5, 5, -5, 5))
+    bend = line_from_points([[0, 0], [1, 1], [2, 0]], 0)
+    with pytest.raises(PatternError, match="radius of 1 mm"):
+        check_lines([bend], min_radius=3.0)
+    with pytest.raises(PatternError, match="line 7: points must be"):
+        line_from_points([[0, 0]], 7)
+    with pytest.raises(PatternError, match="ids must be unique"):
+        check_lines([a, line_from_points([[0, 9], [1, 9]], 5, id="0")])
+
+
+def test_pre_stretch_along_inclined_lines() -> None:
+    assert eps_along(0.0, 0.5, 0.3) == pytest.approx(0.5)
+    assert eps_along(90.0, 0.5, 0.3) == pytest.approx(1.5**-0.3 - 1.0)
+    e45 = eps_along(45.0, 0.5, 0.3)
+    assert eps_along(90.0, 0.5, 0.3) < 0 < e45 < 0.5
+    # monotone from along to across the stretch
+    es = [eps_along(t, 0.5, 0.3) for t in range(0, 91, 5)]
+    assert all(x > y for x, y in zip(es, es[1:], strict=False))
+
+
+def test_predict_lines_groups_by_relaxation_distance() -> None:
+    from undulate import theory as T
+
+    sh = float(T.s_hat(0.3, 0.5))
+    ys = [0.0, 1.0 + 0.5 * sh, 2.0 + 2.0 * sh + 0.5 * sh]  # gaps 0.5 s_hat, then 2 s_hat
+    lines = [line_from_points([[-50, y], [50, y]], k) for k, y in enumerate(ys)]
+    out = predict_lines(lines, h=0.3, eps0=0.5)
+    assert [g["N"] for g in out["groups"]] in ([2, 1], [1, 2])
+    fams = {ln["id"]: ln["family"] for ln in out["lines"]}
+    assert fams["0"] == fams["1"] == "coherent" and fams["2"] == "single"
