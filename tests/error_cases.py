@@ -254,6 +254,14 @@ CASES: list[ErrorCase] = [
               lambda d: _gcode_args(d, "--nozzle", "-1"), ("nozzle: must be a number > 0",)),
     ErrorCase("gcode-width", "Print files (`undulate gcode`)", "rods narrower than the nozzle",
               lambda d: _gcode_args(d, "--nozzle", "1.5"), ("cannot be laid in passes",)),
+    # ---- serve --------------------------------------------------------------------------
+    ErrorCase("serve-port", "Web page (`undulate serve`)", "`--port 0`",
+              lambda d: ["serve", "--port", "0"], ("--port: must be in 1..65535",)),
+    ErrorCase("serve-workers", "Web page (`undulate serve`)", "`--workers 0`",
+              lambda d: ["serve", "--workers", "0"], ("--workers: must be in 1..64",)),
+    ErrorCase("serve-jobs", "Web page (`undulate serve`)", "`--jobs` is a file",
+              lambda d: (d / "jobs").write_text("x") and ["serve", "--jobs", "jobs"],
+              ("--jobs: jobs is a file",)),
     # ---- design -------------------------------------------------------------------------
     ErrorCase("design-key", "Inverse design (`undulate design`)", "`--target x=3`",
               lambda d: ["design", "--target", "x=3"], ("unknown key 'x'", "l, lam, a, n")),

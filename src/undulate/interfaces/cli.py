@@ -7,6 +7,7 @@
     undulate design --target l=20    what to print for a wanted wave (docs/design.md)
     undulate gcode CASE.toml --out F G-code that prints the case's lines (docs/fabrication.md)
     undulate study run PRESET ...    parametric studies (docs/studies.md)
+    undulate serve                   a local web page: draw, predict, simulate (docs/web.md)
 
 Every refused input is one line on stderr naming the file, field or option, exit code 2;
 docs/errors.md lists them.
@@ -163,11 +164,13 @@ def _register_subcommands() -> None:
     from .cli_analysis import register as register_analysis
     from .cli_design import register as register_design
     from .cli_fabrication import register as register_fabrication
+    from .cli_serve import register as register_serve
     from .cli_study import study_app
 
     register_analysis(app)
     register_design(app)
     register_fabrication(app)
+    register_serve(app)
     app.add_typer(study_app, name="study")
 
 
