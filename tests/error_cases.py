@@ -254,6 +254,16 @@ CASES: list[ErrorCase] = [
               lambda d: _gcode_args(d, "--nozzle", "-1"), ("nozzle: must be a number > 0",)),
     ErrorCase("gcode-width", "Print files (`undulate gcode`)", "rods narrower than the nozzle",
               lambda d: _gcode_args(d, "--nozzle", "1.5"), ("cannot be laid in passes",)),
+    ErrorCase("gcode-pattern-cross", "Print files (`undulate gcode`)",
+              "`--pattern` with crossing lines",
+              lambda d: (d / "x.svg").write_text(
+                  '<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="100mm" '
+                  'viewBox="0 0 100 100"><line id="a" x1="0" y1="50" x2="100" y2="50"/>'
+                  '<line id="b" x1="50" y1="0" x2="50" y2="100"/></svg>')
+              and ["gcode", "--pattern", "x.svg", "--out", "x.gcode"],
+              ("x.svg: lines a and b: cross at (0, 0) mm",)),
+    ErrorCase("gcode-none", "Print files (`undulate gcode`)", "neither a case nor `--pattern`",
+              lambda d: ["gcode", "--out", "x.gcode"], ("give a case file (CONFIG) or --pattern",)),
     # ---- serve --------------------------------------------------------------------------
     ErrorCase("serve-port", "Web page (`undulate serve`)", "`--port 0`",
               lambda d: ["serve", "--port", "0"], ("--port: must be in 1..65535",)),

@@ -167,3 +167,24 @@ def test_drawings_in_the_print_and_relaxed_frames(tmp_path: Path):
                                for ln in lines])
                 assert np.array(got) == pytest.approx(np.array(want))
                 assert len(msp.query("LWPOLYLINE[layer=='FOOTPRINTS']")) == len(lines)
+
+
+def test_gcode_from_an_svg_pattern(tmp_path) -> None:
+    """`undulate gcode --pattern lines.svg`: the drawing's lines, curved ones included."""
+    from typer.testing import CliRunner
+
+    from undulate.interfaces.cli import app
+
+    svg = tmp_path / "lines.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="120mm" height="60mm" '
+                   'viewBox="0 0 120 60"><line x1="10" y1="10" x2="110" y2="10"/>'
+                   '<path d="M10 45 C 40 35, 80 55, 110 45"/></svg>')
+    out = tmp_path / "lines.gcode"
+    r = CliRunner().invoke(app, ["gcode", "--pattern", str(svg), "--h", "0.4", "--out",
+                                 str(out)])
+    assert r.exit_code == 0, r.output
+    assert "2 line(s)" in r.output
+    text = out.read_text()
+    xy = [(float(w[1:]) for w in ln.split() if w[0] in "XY") for ln in text.splitlines()
+          if ln.startswith("G1") and " E" in ln]
+    assert len(xy) > 20  # the curve is printed as many short moves

@@ -11,8 +11,19 @@ __all__ = ["register"]
 
 
 def gcode(
-    config: Annotated[Path, typer.Argument(help="case description (TOML)")],
     out: Annotated[Path, typer.Option("--out", help="G-code file to write")],
+    config: Annotated[Path | None, typer.Argument(
+        help="case description (TOML); or give --pattern")] = None,
+    pattern: Annotated[Path | None, typer.Option(
+        "--pattern", help="lines of an .svg or .dxf drawing instead of a case (print frame, "
+        "centred on the fabric; docs/web.md for units)")] = None,
+    scale: Annotated[float, typer.Option("--scale", help="with --pattern: multiply the "
+                                         "drawing's coordinates")] = 1.0,
+    h: Annotated[float, typer.Option("--h", help="with --pattern: rod thickness, mm")] = 0.3,
+    b: Annotated[float, typer.Option("--b", help="with --pattern: rod width, mm")] = 1.0,
+    eps0: Annotated[float, typer.Option("--eps0", help="with --pattern: pre-stretch")] = 0.5,
+    t: Annotated[float, typer.Option("--t", help="with --pattern: fabric thickness, mm")]
+    = 0.4,
     preview: Annotated[Path | None, typer.Option(
         "--preview", help="also write a PNG top view of the toolpaths")] = None,
     drawing: Annotated[Path | None, typer.Option(
@@ -38,19 +49,47 @@ def gcode(
     """G-code that prints the case's lines on the fabric clamped stretched on the bed.
 
     Layers and passes give the rods' thickness h and width b; travel moves keep clear of
-    printed lines; the header says how far to stretch the fabric. Example:
-    undulate gcode examples/single_rod.toml --out rod.gcode --preview rod.png
+    printed lines; the header says how far to stretch the fabric. Examples:
+    undulate gcode examples/single_rod.toml --out rod.gcode --preview rod.png;
+    undulate gcode --pattern lines.svg --h 0.4 --out lines.gcode
     """
     from ..fabrication import GcodeError, PrintSettings, lines_of_case, make_gcode, preview_png
     from ..fabrication.drawing import write_drawing
-    from ..model import ConfigError, load_case
+    from ..model import ConfigError, Fabric, Release, Rods, load_case
+    from ..model.config import check_value
     from .cli import _fail
 
-    try:
-        case = load_case(config)
-    except ConfigError as err:
-        line = (str(err).splitlines() or ["invalid case"])[0]
-        raise _fail(line if line.startswith(str(config)) else f"{config}: {line}") from None
+    if (config is None) == (pattern is None):
+        raise _fail("give a case file (CONFIG) or --pattern FILE, not both" if config
+                    else "give a case file (CONFIG) or --pattern FILE (.svg or .dxf)")
+    if config is not None:
+        try:
+            case = load_case(config)
+        except ConfigError as err:
+            line = (str(err).splitlines() or ["invalid case"])[0]
+            raise _fail(line if line.startswith(str(config)) else f"{config}: {line}") from None
+        lines = lines_of_case(case)
+        name, e0, ft, nu = case.name, case.release.eps0, case.fabric.t, case.fabric.nu
+        extent = case.fabric_extent()
+    else:
+        from ..fabrication import PrintLine
+        from ..model.pattern import PatternError, check_lines, read_pattern
+
+        try:
+            for opt, model, field, val in (("--h", Rods, "h", h), ("--b", Rods, "b", b),
+                                           ("--eps0", Release, "eps0", eps0),
+                                           ("--t", Fabric, "t", t)):
+                check_value(model, field, val, opt)
+            drawn_lines = read_pattern(pattern, scale=scale)
+            check_lines(drawn_lines, b=b)
+        except (ConfigError, PatternError) as err:
+            msg = str(err)
+            raise _fail(f"{pattern}: {msg}" if isinstance(err, PatternError)
+                        and str(pattern) not in msg else msg) from None
+        lines = [PrintLine(k, ln.points, ln.h or h, ln.b or b)
+                 for k, ln in enumerate(drawn_lines)]
+        name, e0, ft, nu = pattern.stem, eps0, t, Fabric().nu
+        extent = None
     if (origin_x is None) != (origin_y is None):
         raise _fail("--origin-x, --origin-y: give both or neither")
     st = PrintSettings(bed_x=bed_x, bed_y=bed_y, nozzle=nozzle, filament=filament,
@@ -58,9 +97,8 @@ def gcode(
                        fabric_z=fabric_z, print_speed=print_speed, travel_speed=travel_speed,
                        nozzle_temp=nozzle_temp, bed_temp=bed_temp)
     try:
-        text, plan = make_gcode(lines_of_case(case), st, eps0=case.release.eps0,
-                                fabric_t=case.fabric.t, name=case.name,
-                                fabric_extent=case.fabric_extent())
+        text, plan = make_gcode(lines, st, eps0=e0, fabric_t=ft, name=name,
+                                fabric_extent=extent)
     except GcodeError as err:
         raise _fail(str(err)) from None
     if drawing is not None and drawing.suffix.lower() not in (".svg", ".dxf"):
@@ -69,16 +107,15 @@ def gcode(
     try:
         out.write_text(text)
         if preview is not None:
-            preview_png(plan, preview, title=f"{case.name}: toolpaths on the bed")
+            preview_png(plan, preview, title=f"{name}: toolpaths on the bed")
         if drawing is not None:
-            drawn = write_drawing(lines_of_case(case), drawing, eps0=case.release.eps0,
-                                  nu=case.fabric.nu, name=case.name)
+            drawn = write_drawing(lines, drawing, eps0=e0, nu=nu, name=name)
     except OSError as err:
         raise _fail(f"cannot write {err.filename or out} ({err.strerror or err})") from None
     n_print = sum(m.kind == "print" for m in plan.moves)
-    typer.echo(f"wrote {out}: {len(lines_of_case(case))} line(s), {plan.layers} layer(s) of "
+    typer.echo(f"wrote {out}: {len(lines)} line(s), {plan.layers} layer(s) of "
                f"{plan.layer_height:.4g} mm, {n_print} printed moves; stretch the fabric by "
-               f"eps0 = {case.release.eps0:g} along X before printing"
+               f"eps0 = {e0:g} along X before printing"
                + (f"; preview {preview}" if preview else "")
                + (f"; drawings {', '.join(map(str, drawn))}" if drawn else ""))
 
