@@ -54,9 +54,11 @@ def test_predict_parallel_family_matches_theory(client: TestClient) -> None:
     r = client.post("/api/predict", json={"lines": FAMILY, "h": 0.3, "eps0": 0.5})
     assert r.status_code == 200, r.text
     out = r.json()
-    assert [ln["n"] for ln in out["lines"]] == [int(T.n(0.3, 0.5, 100.0))] * 5
-    assert out["lines"][0]["l"] == pytest.approx(float(T.l(0.3, 0.5)))
     pm = T.phase_map(0.3, 10.0, eps0=0.5, L=100.0, N=5)
+    assert [ln["n_alone"] for ln in out["lines"]] == [int(T.n(0.3, 0.5, 100.0))] * 5
+    assert out["lines"][0]["l_alone"] == pytest.approx(float(T.l(0.3, 0.5)))
+    assert [ln["n"] for ln in out["lines"]] == [int(pm["n"].item())] * 5
+    assert out["lines"][0]["l"] == pytest.approx(float(pm["l"].item()))
     assert {ln["family"] for ln in out["lines"]} == {str(pm["family"].item())}
     assert out["groups"][0]["N"] == 5 and out["groups"][0]["s"] == pytest.approx(10.0)
     assert out["simulable"] is True

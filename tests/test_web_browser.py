@@ -80,8 +80,9 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         cells = rows.nth(0).locator("td")
         page.wait_for_function("document.querySelector('#prediction tbody td:nth-child(2)')"
                                ".textContent == '40'")
-        assert int(cells.nth(3).inner_text()) == int(T.n(0.3, 0.5, 40.0))
-        fam = str(T.phase_map(0.3, 10.0, eps0=0.5, L=40.0, N=3)["family"].item())
+        pm = T.phase_map(0.3, 10.0, eps0=0.5, L=40.0, N=3)
+        assert int(cells.nth(3).inner_text()) == int(pm["n"].item())
+        fam = str(pm["family"].item())
         assert cells.nth(6).inner_text() == fam
         # a bad thickness: one clear line naming the field, no prediction
         _set(page, "h", -1)

@@ -77,9 +77,10 @@ def predict_lines(lines: list[Line], *, h: float, eps0: float, b: float = MATERI
     """Per-line and per-group predictions for a pattern (JSON-ready).
 
     Returns ``{"lines": [...], "groups": [...], "warnings": [...]}``; each line has ``id``,
-    ``L``, ``angle_deg``, ``eps_line``, ``h``, ``b``, ``n``, ``l``, ``l_n``, ``a`` (the
-    formula amplitude), ``R``, ``s_hat``, ``family`` (that of its group), ``group`` and its
-    own ``warnings``.
+    ``L``, ``angle_deg``, ``eps_line``, ``h``, ``b``, ``n`` and ``l`` (those of its group:
+    bundling at small gaps makes N rods buckle as one of thickness ``h_eff``), ``n_alone`` and
+    ``l_alone`` (the line by itself), ``l_n``, ``a`` (the formula amplitude), ``R``,
+    ``s_hat``, ``family`` (that of its group), ``group`` and its own ``warnings``.
     """
     per: list[dict[str, Any]] = []
     reach: list[float] = []
@@ -132,12 +133,17 @@ def predict_lines(lines: list[Line], *, h: float, eps0: float, b: float = MATERI
                              L=float(np.mean([per[i]["L"] for i in live])), N=len(members),
                              b=per[k]["b"], E_B=E_B, E=E, t=t)
             fam = str(pm["family"].item())
-            rec_g.update(s=s, family=fam, n_group=int(pm["n"].item()))
+            rec_g.update(s=s, family=fam, n_group=int(pm["n"].item()),
+                         l_group=float(pm["l"].item()), h_eff=float(pm["h_eff"].item()))
             if np.ptp([per[i]["L"] for i in live]) > 0.05 * max(per[i]["L"] for i in live):
                 rec_g["warning"] = ("lines of different lengths side by side: their n differ "
                                     "and the waves may branch where they meet")
         for i in members:
             per[i]["group"] = gi
+            per[i]["n_alone"], per[i]["l_alone"] = per[i]["n"], per[i]["l"]
+            if "n_group" in rec_g and per[i]["n"]:
+                # the group's half-waves: bundled rods (small s) buckle as one thicker rod
+                per[i]["n"], per[i]["l"] = rec_g["n_group"], rec_g["l_group"]
             if per[i].get("family") != "flat":
                 per[i]["family"] = rec_g["family"]
             if per[i]["n"] == 1:

@@ -228,7 +228,7 @@ function showResults(id, st) {
   ul.innerHTML = "";
   for (const f of st.files) {
     const url = `/api/jobs/${id}/files/${encodeURIComponent(f)}`;
-    if (f.endsWith("_side.png") || f === "overview.png") {
+    if (f === "rod_0_side.png") {
       const img = document.createElement("img");
       img.src = url;
       img.alt = f;
