@@ -1,7 +1,11 @@
 """A fake job worker for the web tests: no simulation, a few states over about a second.
 
 It is the worker body of :class:`undulate.interfaces.web.jobs.JobManager` (the job folder as
-a string), so the queue, progress, cancel and downloads are tested without the engine.
+a string), so the queue, progress, cancel and downloads are tested without the engine. It
+writes ``metrics.json`` and a small ``final.vtu`` laid out as the real output's (fabric
+triangles first, then each rod's centre line as its own run of points joined by line cells):
+each rod a sine of 3 half-waves, 2 mm high, 0.5 mm above a flat fabric grid that reaches
+:data:`FABRIC_MARGIN` mm beyond the rods.
 """
 
 from __future__ import annotations
@@ -10,7 +14,47 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from undulate.interfaces.web.jobs import _write_state, read_state
+
+FABRIC_MARGIN = 40.0  # the fake fabric grid reaches this far beyond the rods [mm]
+ROD_POINTS = 31
+
+
+def fake_rods(case: dict) -> list[np.ndarray]:
+    """The rods' centre lines of the fake final.vtu: (ROD_POINTS, 3) per segment."""
+    out = []
+    for seg in case["rods"]["segments"]:
+        (x0, y0), length = seg["start"], seg["length"]
+        x = np.linspace(x0, x0 + length, ROD_POINTS)
+        z = 0.5 + 2.0 * np.sin(3 * np.pi * (x - x0) / length)
+        out.append(np.column_stack([x, np.full_like(x, y0), z]))
+    return out
+
+
+def write_fake_vtu(path: Path, case: dict) -> None:
+    import meshio
+
+    rods = fake_rods(case)
+    allp = np.vstack(rods)
+    lo = allp[:, :2].min(axis=0) - FABRIC_MARGIN
+    hi = allp[:, :2].max(axis=0) + FABRIC_MARGIN
+    gx, gy = np.linspace(lo[0], hi[0], 25), np.linspace(lo[1], hi[1], 17)
+    X, Y = np.meshgrid(gx, gy, indexing="ij")
+    pts = [np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])]
+    idx = np.arange(X.size).reshape(X.shape)
+    a, b = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    tris = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    off, lines = X.size, []
+    for r in rods:
+        pts.append(r)
+        lines.append(np.column_stack([np.arange(off, off + len(r) - 1),
+                                      np.arange(off + 1, off + len(r))]))
+        off += len(r)
+    meshio.write(str(path), meshio.Mesh(np.vstack(pts), [("triangle", tris),
+                                                         ("line", np.concatenate(lines))]))
 
 
 def fake_job(folder: str) -> None:
@@ -27,5 +71,6 @@ def fake_job(folder: str) -> None:
     res = f / "result"
     res.mkdir()
     (res / "metrics.json").write_text(json.dumps({"n": 3, "rods": len(case["rods"]["segments"])}))
+    write_fake_vtu(res / "final.vtu", case)
     st.update(status="done", finished=time.time(), metrics={"n": 3, "family": "waves"})
     _write_state(f, st)

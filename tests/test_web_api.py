@@ -1,4 +1,5 @@
-"""The web page's API (FastAPI test client): prediction, SVG import, G-code, jobs, bad input.
+"""The web page's API (FastAPI test client): prediction, SVG import, G-code, drawings, jobs,
+the 3D shape, bad input, the body size limit, and clients that must not see each other's jobs.
 
 The jobs run a fake worker (tests/_web_fakes.py) in real spawned processes; the browser test
 (tests/test_web_browser.py) runs the real engine.
@@ -7,15 +8,17 @@ The jobs run a fake worker (tests/_web_fakes.py) in real spawned processes; the 
 from __future__ import annotations
 
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("fastapi")
-from _web_fakes import fake_job  # noqa: E402
+from _web_fakes import FABRIC_MARGIN, fake_job, fake_rods  # noqa: E402
 from fastapi.testclient import TestClient  # noqa: E402
 
-from undulate.interfaces.web.app import create_app  # noqa: E402
+from undulate.interfaces.web.app import COOKIE, MAX_BODY, create_app  # noqa: E402
 
 FAMILY = [{"id": f"r{k}", "points": [[-50.0, y], [50.0, y]]}
           for k, y in enumerate([-22.0, -11.0, 0.0, 11.0, 22.0])]
@@ -27,6 +30,15 @@ def client(tmp_path: Path):
     with TestClient(app) as c:
         yield c
     app.state.jobs.shutdown()
+
+
+@pytest.fixture()
+def other(client: TestClient):
+    """A second browser on the same server: its own cookie jar, so its own client id. (Not
+    entered as a context: that would run the app's lifespan, whose end stops the jobs.)"""
+    c = TestClient(client.app)
+    yield c
+    c.close()
 
 
 def _wait(client: TestClient, jid: str, until: tuple[str, ...], timeout: float = 60.0) -> dict:
@@ -141,7 +153,7 @@ def test_jobs_run_concurrently_queue_and_download(client: TestClient) -> None:
     done = [_wait(client, j, ("done", "failed")) for j in ids]
     assert all(s["status"] == "done" for s in done), done
     st = done[0]
-    assert st["files"] == ["metrics.json"] and st["metrics"]["n"] == 3
+    assert st["files"] == ["final.vtu", "metrics.json"] and st["metrics"]["n"] == 3
     f = client.get(f"/api/jobs/{ids[0]}/files/metrics.json")
     assert f.status_code == 200 and f.json()["rods"] == 5
     assert client.get(f"/api/jobs/{ids[0]}/files/..%2Fcase.json").status_code == 404
@@ -165,3 +177,150 @@ def test_job_refuses_what_the_engine_cannot_simulate(client: TestClient) -> None
     assert r.status_code == 422 and "straight lines along the stretch" in r.json()["error"]
     r = client.post("/api/jobs", json={"lines": FAMILY, "quality": "best"})
     assert r.status_code == 422 and r.json()["error"].startswith("quality:")
+
+
+def _svg_lines(text: str) -> tuple[list[np.ndarray], np.ndarray]:
+    """The polylines of a drawing (SVG user units = mm) and its viewBox."""
+    root = ET.fromstring(text)
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    box = np.array([float(v) for v in root.get("viewBox").split()])
+    out = [np.array([[float(v) for v in xy.split(",")] for xy in pl.get("points").split()])
+           for pl in root.iterfind(".//s:polyline", ns)]
+    return out, box
+
+
+def test_drawing_svg_in_the_print_and_the_relaxed_frame(client: TestClient) -> None:
+    from undulate.mechanics.build import lateral_stretch
+
+    eps0, nu = 0.5, 0.3
+    body = {"lines": FAMILY, "eps0": eps0, "nu": nu}
+    pr = client.post("/api/drawing?frame=print", json=body)
+    rl = client.post("/api/drawing?frame=relaxed", json=body)
+    assert pr.status_code == 200 and rl.status_code == 200, (pr.text, rl.text)
+    assert pr.headers["content-type"].startswith("image/svg+xml")
+    assert 'filename="lines-print.svg"' in pr.headers["content-disposition"]
+    assert 'filename="lines-relaxed.svg"' in rl.headers["content-disposition"]
+    assert client.post("/api/drawing", json=body).text == pr.text  # print is the default
+    p_lines, p_box = _svg_lines(pr.text)
+    r_lines, r_box = _svg_lines(rl.text)
+    assert len(p_lines) == len(r_lines) == 5
+    lam_y = lateral_stretch(eps0, nu)
+    for k, (p, r) in enumerate(zip(p_lines, r_lines, strict=True)):
+        # back to fabric coordinates: the drawing is centred on the lines' (symmetric) extent,
+        # SVG's y grows downwards
+        pf = np.column_stack([p[:, 0] - p_box[2] / 2, p_box[3] / 2 - p[:, 1]])
+        rf = np.column_stack([r[:, 0] - r_box[2] / 2, r_box[3] / 2 - r[:, 1]])
+        assert pf == pytest.approx(np.array(FAMILY[k]["points"]), abs=1e-3)
+        assert rf[:, 0] == pytest.approx(pf[:, 0] / (1 + eps0), abs=1e-3)
+        assert rf[:, 1] == pytest.approx(pf[:, 1] / lam_y, abs=1e-3)
+    # the print-frame drawing reads back as the same lines (an SVG upload of it)
+    back = client.post("/api/pattern/svg", json={"svg": pr.text}).json()["lines"]
+    assert [ln["id"] for ln in back] == [f"line-{k}" for k in range(5)]
+    for ln, want in zip(back, FAMILY, strict=True):
+        assert np.array(ln["points"]) == pytest.approx(np.array(want["points"]), abs=1e-3)
+    bad = client.post("/api/drawing?frame=side", json=body)
+    assert bad.status_code == 422 and bad.json()["error"].startswith("frame: "), bad.text
+    bad = client.post("/api/drawing?frame=relaxed", json={"lines": FAMILY, "eps0": -2.0})
+    assert bad.status_code == 422 and bad.json()["error"].startswith("eps0: "), bad.text
+
+
+def test_body_over_the_limit_is_413_with_one_line(client: TestClient) -> None:
+    assert client.get("/api/defaults").json()["max_body"] == MAX_BODY
+    svg = ('<svg xmlns="http://www.w3.org/2000/svg" width="200mm" height="100mm" '
+           'viewBox="0 0 200 100"><line id="a" x1="10" y1="20" x2="110" y2="20"/>'
+           "<!-- {} --></svg>")
+    # just under the limit: read as usual
+    fill = MAX_BODY - len(svg) - 200
+    ok = client.post("/api/pattern/svg", json={"svg": svg.format("x" * fill)})
+    assert ok.status_code == 200, ok.text[:300]
+    assert [ln["id"] for ln in ok.json()["lines"]] == ["a"]
+    # over it: refused before the body is read (content-length), one line saying the limit
+    big = client.post("/api/pattern/svg", json={"svg": svg.format("x" * MAX_BODY)})
+    assert big.status_code == 413, big.text[:300]
+    msg = big.json()["error"]
+    assert msg.startswith("request body: ") and f"{MAX_BODY:,} bytes" in msg, msg
+    assert "5 MB" in msg and "SVG" in msg and "\n" not in msg and len(msg) < 200, msg
+    # without a content-length (chunked): counted as it arrives, the same answer
+    payload = b'{"svg": "' + b"x" * (MAX_BODY + 10) + b'"}'
+    chunks = (payload[k:k + 65536] for k in range(0, len(payload), 65536))
+    r = client.post("/api/pattern/svg", content=chunks,
+                    headers={"content-type": "application/json"})
+    assert r.status_code == 413, r.text[:300]
+    assert r.json()["error"].startswith("request body: more than ")
+    # the server still answers
+    assert client.post("/api/predict", json={"lines": FAMILY}).status_code == 200
+
+
+def test_clients_do_not_see_each_others_jobs(client: TestClient, other: TestClient) -> None:
+    jid = client.post("/api/jobs", json={"lines": FAMILY, "seed": 1}).json()["id"]
+    mine = client.post("/api/jobs", json={"lines": FAMILY[:2], "seed": 1}).json()["id"]
+    theirs = other.post("/api/jobs", json={"lines": FAMILY[:1], "seed": 1}).json()["id"]
+    a, b = client.cookies.get(COOKIE), other.cookies.get(COOKIE)
+    assert a and b and a != b and len(a) == 32
+    for j in (jid, mine):
+        _wait(client, j, ("done",))
+    _wait(other, theirs, ("done",))
+    assert [j["id"] for j in client.get("/api/jobs").json()] == [jid, mine]
+    assert [j["id"] for j in other.get("/api/jobs").json()] == [theirs]
+    # every route of a job: "no such job" (404) for the other client, as for an unknown id
+    for path in (f"/api/jobs/{jid}", f"/api/jobs/{jid}/files/metrics.json",
+                 f"/api/jobs/{jid}/files/final.vtu", f"/api/jobs/{jid}/shape"):
+        r = other.get(path)
+        assert r.status_code == 404 and r.json()["error"] == f"job {jid}: no such job", path
+        assert client.get(path).status_code == 200, path
+    r = other.delete(f"/api/jobs/{jid}")
+    assert r.status_code == 404 and "no such job" in r.json()["error"]
+    assert client.get(f"/api/jobs/{jid}").json()["status"] == "done"
+    assert other.get(f"/api/jobs/{theirs}").json()["status"] == "done"
+    assert client.get(f"/api/jobs/{theirs}").status_code == 404
+    # the owner is not shown in the job's state
+    assert "owner" not in client.get(f"/api/jobs/{jid}").json()
+    # a browser without the cookie, or with a forged one, is a new client: sees nothing
+    for forged in ("not-a-client-id", a.upper(), a[:-1]):
+        stranger = TestClient(client.app)  # an empty cookie jar: the forged one is sent alone
+        hdr = {"cookie": f"{COOKIE}={forged}"}
+        r = stranger.get("/api/jobs", headers=hdr)
+        assert r.status_code == 200 and r.json() == [], forged
+        new = r.cookies.get(COOKIE)
+        assert new and len(new) == 32 and new not in (a, b), (forged, new)
+        assert stranger.get(f"/api/jobs/{jid}", headers=hdr).status_code == 404
+        stranger.close()
+    # the cookie is set once, HttpOnly and SameSite=Strict; a known client gets none again
+    fresh = TestClient(client.app).get("/api/defaults").headers.get_list("set-cookie")
+    assert len(fresh) == 1 and "httponly" in fresh[0].lower(), fresh
+    assert "samesite=strict" in fresh[0].lower(), fresh
+    assert "set-cookie" not in client.get("/api/defaults").headers
+
+
+def test_cancel_by_another_client_leaves_the_job_running(client: TestClient,
+                                                         other: TestClient) -> None:
+    jid = client.post("/api/jobs", json={"lines": FAMILY, "seed": 10}).json()["id"]  # ~2 s
+    _wait(client, jid, ("running",))
+    assert other.delete(f"/api/jobs/{jid}").status_code == 404
+    assert _wait(client, jid, ("done", "cancelled", "failed"))["status"] == "done"
+
+
+def test_shape_of_a_finished_job(client: TestClient) -> None:
+    lines = [{"points": [[-30.0, 6.0], [30.0, 6.0]]}, {"points": [[-20.0, -6.0], [40.0, -6.0]]}]
+    jid = client.post("/api/jobs", json={"lines": lines, "seed": 2}).json()["id"]
+    early = client.get(f"/api/jobs/{jid}/shape")
+    assert early.status_code == 404 and "no file 'final.vtu'" in early.json()["error"]
+    _wait(client, jid, ("done",))
+    r = client.get(f"/api/jobs/{jid}/shape")
+    assert r.status_code == 200, r.text
+    shape = r.json()
+    case = {"rods": {"segments": [{"start": [-30.0, 6.0], "length": 60.0},
+                                  {"start": [-20.0, -6.0], "length": 60.0}]}}
+    want = fake_rods(case)
+    assert len(shape["rods"]) == 2  # one chain per rod, not one joined line
+    for got, w in zip(shape["rods"], want, strict=True):
+        assert np.array(got) == pytest.approx(w, abs=1e-3)
+    pts = np.array(shape["fabric"]["points"])
+    tri = np.array(shape["fabric"]["triangles"])
+    assert tri.ndim == 2 and tri.shape[1] == 3 and len(tri) > 50
+    assert tri.min() == 0 and tri.max() == len(pts) - 1  # every point kept is used
+    # the fabric near the rods only (30 mm around them), not the whole fake sheet (40 mm)
+    assert pts[:, 0].min() >= -30.0 - 30.0 - 1e-9 and pts[:, 0].max() <= 40.0 + 30.0 + 1e-9
+    assert pts[:, 1].min() >= -36.0 - 1e-9 and pts[:, 1].max() <= 36.0 + 1e-9
+    assert pts[:, 0].max() - pts[:, 0].min() > 60.0  # but more than the rods themselves
+    assert FABRIC_MARGIN > 30.0

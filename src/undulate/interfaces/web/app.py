@@ -10,6 +10,11 @@ Routes (JSON in and out; every bad input is a 422 with ``{"error": "<field>: <pr
 * ``POST /api/jobs``                 start a simulation in the background; returns its id
 * ``GET  /api/jobs``, ``GET /api/jobs/{id}``, ``DELETE /api/jobs/{id}``
 * ``GET  /api/jobs/{id}/files/{name}``  a file of a finished simulation
+* ``GET  /api/jobs/{id}/shape``      the final shape for the 3D view (rods, fabric near them)
+* ``POST /api/drawing?frame=print|relaxed``  SVG drawing of the lines
+
+Each browser gets a random client id (cookie ``undulate_client``): it sees only its own jobs.
+Request bodies are limited to :data:`MAX_BODY` bytes.
 
 The simulation is the real engine (``undulate run``): straight lines along the stretch (x),
 any lengths and positions. Other lines get the analytical prediction only.
@@ -18,15 +23,17 @@ any lengths and positions. Other lines get the analytical prediction only.
 from __future__ import annotations
 
 import contextlib
+import uuid
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ...model import Fabric, Release, Rods
 from ...model.config import MATERIAL_DEFAULTS, ConfigError, allowed_range, check_value
@@ -36,6 +43,10 @@ from .jobs import JobError, JobManager
 __all__ = ["create_app", "case_from_lines"]
 
 STATIC = Path(__file__).parent / "static"
+
+#: largest request body accepted (an uploaded SVG travels as text in JSON) [bytes]
+MAX_BODY = 5_000_000
+COOKIE = "undulate_client"
 
 #: mesh and release of the page's "quick" simulations (coarse, for trying ideas in seconds);
 #: "standard" uses the case-file defaults (as ``undulate run``)
@@ -72,7 +83,7 @@ class JobIn(Params):
 
 class SvgIn(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
-    svg: str = Field(min_length=1, max_length=5_000_000)
+    svg: str = Field(min_length=1, max_length=MAX_BODY)
     scale: float = 1.0
     b: float = MATERIAL_DEFAULTS["b"]
 
@@ -119,13 +130,123 @@ def case_from_lines(p: Params, lines: list[Line], *, quality: str = "quick", see
     return case
 
 
+def final_shape(vtu: Path, margin: float = 30.0) -> dict[str, Any]:
+    """Rod centre lines and the fabric's triangles within ``margin`` mm of the rods (x, y) from
+    a run's ``final.vtu``, rounded to 1 um: the data of the page's 3D view.
+
+    ``{"rods": [[[x, y, z], ...], ...], "fabric": {"points": [[x, y, z], ...],
+    "triangles": [[i, j, k], ...]}}``; each rod is one chain of the file's line cells (the
+    output writes every rod's centre line as its own run of points)."""
+    import meshio
+    import numpy as np
+
+    m = meshio.read(vtu)
+    pts = np.asarray(m.points, float)
+    tri_cells = [c.data for c in m.cells if c.type == "triangle"]
+    tris = np.concatenate(tri_cells) if tri_cells else np.zeros((0, 3), int)
+    segs = [c.data for c in m.cells if c.type == "line"]
+    rods: list[list[list[float]]] = []
+    if segs:
+        edges = np.concatenate(segs)
+        # chains of consecutive line cells are the rods
+        start = 0
+        for k in range(1, len(edges) + 1):
+            if k == len(edges) or edges[k, 0] != edges[k - 1, 1]:
+                idx = np.r_[edges[start:k, 0], edges[k - 1, 1]]
+                rods.append(pts[idx].round(3).tolist())
+                start = k
+    rp = np.vstack([np.asarray(r) for r in rods]) if rods else pts
+    lo, hi = rp[:, :2].min(axis=0) - margin, rp[:, :2].max(axis=0) + margin
+    inside = np.all((pts[:, :2] >= lo) & (pts[:, :2] <= hi), axis=1)
+    keep = inside[tris].all(axis=1) if len(tris) else np.zeros(0, bool)
+    used = np.unique(tris[keep])
+    new = -np.ones(len(pts), int)
+    new[used] = np.arange(len(used))
+    return {"rods": rods, "fabric": {"points": pts[used].round(3).tolist(),
+                                     "triangles": new[tris[keep]].tolist()}}
+
+
+def too_large(size: int | None, limit: int = MAX_BODY) -> str:
+    """The one line of a refused request body (``size`` bytes, None when not known)."""
+    got = "more" if size is None else f"{size:,} bytes, more"
+    return (f"request body: {got} than the {limit:,} bytes ({limit / 1e6:g} MB) the page "
+            "takes; an uploaded SVG must be smaller")
+
+
+class BodyLimit:
+    """ASGI middleware: request bodies of at most ``max_body`` bytes, else ``413`` with one
+    line. A declared ``content-length`` is checked before anything is read; a body without
+    one (chunked) is counted as it arrives and refused once it passes the limit."""
+
+    def __init__(self, app: Any, max_body: int = MAX_BODY) -> None:
+        self.app = app
+        self.max_body = max_body
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        size = dict(scope.get("headers") or ()).get(b"content-length")
+        if size is not None and (not size.isdigit() or int(size) > self.max_body):
+            known = int(size) if size.isdigit() else None
+            await _error(413, too_large(known, self.max_body))(scope, receive, send)
+            return
+        seen = 0
+
+        async def counted() -> dict:
+            nonlocal seen
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > self.max_body:
+                    # FastAPI passes an HTTPException raised while it reads the body on to
+                    # the app's handler: a 413 with the one line
+                    raise HTTPException(413, too_large(None, self.max_body))
+            return msg
+
+        await self.app(scope, counted, send)
+
+
+class ClientId:
+    """ASGI middleware: the browser's client id, from the cookie :data:`COOKIE` (a random
+    32-digit hex string, ``HttpOnly``, ``SameSite=Strict``), or a new one, set in the answer.
+    Jobs belong to the client that started them; the id is ``scope[COOKIE]``."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        cid = Request(scope).cookies.get(COOKIE, "")
+        fresh = not (len(cid) == 32 and all(c in "0123456789abcdef" for c in cid))
+        if fresh:
+            cid = uuid.uuid4().hex
+        scope[COOKIE] = cid
+
+        async def send_cookie(msg: dict) -> None:
+            if fresh and msg["type"] == "http.response.start":
+                r = Response()
+                r.set_cookie(COOKIE, cid, httponly=True, samesite="strict")
+                msg = {**msg, "headers": [*msg.get("headers", []),
+                                          *(h for h in r.raw_headers if h[0] == b"set-cookie")]}
+            await send(msg)
+
+        await self.app(scope, receive, send_cookie)
+
+
+def _client(request: Request) -> str:
+    return request.scope[COOKIE]
+
+
 def _error(status: int, msg: str) -> JSONResponse:
     return JSONResponse({"error": msg}, status_code=status)
 
 
 def _validation_line(err: RequestValidationError) -> str:
     e = err.errors()[0]
-    loc = [str(x) for x in e.get("loc", ()) if x != "body"]
+    loc = [str(x) for x in e.get("loc", ()) if x not in ("body", "query")]
     where = ".".join(loc) or "body"
     got = e.get("input")
     shown = "" if isinstance(got, dict | list) or got is None else f"; got {got!r}"
@@ -173,7 +294,8 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
     def defaults() -> dict[str, Any]:
         rng = {name: allowed_range(m, f) for name, (m, f) in _FIELDS.items()}
         return {"values": Params.model_construct(lines=[]).model_dump(exclude={"lines"}),
-                "ranges": rng, "units": {"length": "mm", "modulus": "MPa"}}
+                "ranges": rng, "units": {"length": "mm", "modulus": "MPa"},
+                "max_body": MAX_BODY}
 
     @app.post("/api/predict")
     def predict(p: Params) -> dict[str, Any]:
@@ -217,37 +339,69 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
             "Content-Disposition": 'attachment; filename="undulate.gcode"'})
 
     @app.post("/api/jobs", status_code=201)
-    def submit(p: JobIn) -> dict[str, Any]:
+    def submit(p: JobIn, request: Request) -> dict[str, Any]:
         from ...model import case_from_dict
 
         lines = _check_params(p)
         case = case_from_lines(p, lines, quality=p.quality, seed=p.seed)
         case_from_dict(case)  # every rule of a case file (raises ConfigError, one line)
-        jid = jobs.submit(case, label=p.label)
+        jid = jobs.submit(case, label=p.label, owner=_client(request))
         return jobs.state(jid)
 
     @app.get("/api/jobs")
-    def list_jobs() -> list[dict[str, Any]]:
-        return jobs.list()
+    def list_jobs(request: Request) -> list[dict[str, Any]]:
+        return jobs.list(_client(request))
 
     @app.get("/api/jobs/{jid}")
-    def job(jid: str) -> dict[str, Any]:
-        return jobs.state(jid)
+    def job(jid: str, request: Request) -> dict[str, Any]:
+        return jobs.state(jid, _client(request))
 
     @app.delete("/api/jobs/{jid}")
-    def cancel(jid: str) -> dict[str, Any]:
-        return jobs.cancel(jid)
+    def cancel(jid: str, request: Request) -> dict[str, Any]:
+        return jobs.cancel(jid, _client(request))
 
-    @app.get("/api/jobs/{jid}/files/{name}")
-    def job_file(jid: str, name: str) -> FileResponse:
-        st = jobs.state(jid)
+    def _done_file(jid: str, name: str, request: Request) -> Path:
+        st = jobs.state(jid, _client(request))
         if name not in st["files"]:
             raise HTTPException(404, f"job {jid}: no file {name!r} (files: "
                                 f"{', '.join(st['files']) or 'none yet'})")
-        return FileResponse(jobs.folder(jid) / "result" / name, filename=name)
+        return jobs.folder(jid) / "result" / name
 
-    @app.exception_handler(HTTPException)
-    async def _http(_: Request, err: HTTPException) -> JSONResponse:
-        return _error(err.status_code, str(err.detail))
+    @app.get("/api/jobs/{jid}/files/{name}")
+    def job_file(jid: str, name: str, request: Request) -> FileResponse:
+        return FileResponse(_done_file(jid, name, request), filename=name)
 
+    @app.get("/api/jobs/{jid}/shape")
+    def job_shape(jid: str, request: Request) -> dict[str, Any]:
+        return final_shape(_done_file(jid, "final.vtu", request))
+
+    @app.post("/api/drawing")
+    def drawing(p: Params, frame: Literal["print", "relaxed"] = "print") -> PlainTextResponse:
+        import tempfile
+
+        import numpy as np
+
+        from ...fabrication import GcodeError, PrintLine
+        from ...fabrication.drawing import write_drawing
+
+        lines = _check_params(p)
+        plines = [PrintLine(k, np.asarray(ln.points), ln.h or p.h, ln.b or p.b)
+                  for k, ln in enumerate(lines)]
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                paths = write_drawing(plines, Path(tmp) / "lines.svg", eps0=p.eps0, nu=p.nu,
+                                      name="undulate")
+            except GcodeError as err:
+                raise PatternError(str(err)) from None
+            text = paths[0 if frame == "print" else 1].read_text()
+        return PlainTextResponse(text, media_type="image/svg+xml", headers={
+            "Content-Disposition": f'attachment; filename="lines-{frame}.svg"'})
+
+    @app.exception_handler(StarletteHTTPException)  # also the router's 404 and 405
+    async def _http(_: Request, err: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse({"error": str(err.detail)}, status_code=err.status_code,
+                            headers=err.headers)
+
+    app.add_middleware(ClientId)
+    app.add_middleware(BodyLimit, max_body=MAX_BODY)  # outermost: before anything reads
     return app

@@ -111,7 +111,7 @@ class JobManager:
         self._thread.start()
 
     # ---- requests --------------------------------------------------------------------
-    def submit(self, case: dict[str, Any], label: str = "") -> str:
+    def submit(self, case: dict[str, Any], label: str = "", owner: str = "") -> str:
         with self._lock:
             if len(self._queue) >= self.max_queued:
                 raise JobError(f"queue full: {len(self._queue)} jobs wait already (at most "
@@ -121,22 +121,27 @@ class JobManager:
             folder.mkdir()
             (folder / "case.json").write_text(json.dumps(case, indent=1))
             _write_state(folder, {"id": jid, "status": "queued", "label": label,
-                                  "created": time.time(), "progress": 0.0, "stage": "queued"})
+                                  "owner": owner, "created": time.time(), "progress": 0.0,
+                                  "stage": "queued"})
             self._queue.append(jid)
         self._wake.set()
         return jid
 
-    def folder(self, jid: str) -> Path:
+    def folder(self, jid: str, owner: str | None = None) -> Path:
+        """The job's folder; a job of another ``owner`` (when given) is "no such job"."""
         if not (len(jid) == 12 and all(c in "0123456789abcdef" for c in jid)):
             raise JobError(f"job {jid!r}: no such job")
         f = self.root / jid
         if not (f / "state.json").is_file():
             raise JobError(f"job {jid}: no such job")
+        if owner is not None and read_state(f).get("owner", "") != owner:
+            raise JobError(f"job {jid}: no such job")
         return f
 
-    def state(self, jid: str) -> dict[str, Any]:
-        f = self.folder(jid)
+    def state(self, jid: str, owner: str | None = None) -> dict[str, Any]:
+        f = self.folder(jid, owner)
         st = read_state(f)
+        st.pop("owner", None)
         st["id"] = jid
         with self._lock:
             if jid in self._queue:
@@ -146,17 +151,21 @@ class JobManager:
             st.get("status") == "done" and res.is_dir()) else []
         return st
 
-    def list(self) -> list[dict[str, Any]]:
+    def list(self, owner: str | None = None) -> list[dict[str, Any]]:
+        """Jobs, oldest first (by when they were asked for; a folder's time changes with
+        every progress report); only those of ``owner`` when given."""
         out = []
-        for f in sorted(self.root.iterdir(), key=lambda p: p.stat().st_mtime):
+        for f in self.root.iterdir():
             if (f / "state.json").is_file():
                 st = read_state(f)
+                if owner is not None and st.get("owner", "") != owner:
+                    continue
                 out.append({k: st.get(k) for k in ("status", "label", "progress", "created")}
                            | {"id": f.name})
-        return out
+        return sorted(out, key=lambda j: (j["created"] or 0.0, j["id"]))
 
-    def cancel(self, jid: str) -> dict[str, Any]:
-        f = self.folder(jid)
+    def cancel(self, jid: str, owner: str | None = None) -> dict[str, Any]:
+        f = self.folder(jid, owner)
         with self._lock:
             if jid in self._queue:
                 self._queue.remove(jid)
@@ -170,7 +179,7 @@ class JobManager:
             st = read_state(f)
             st.update(status="cancelled", stage="cancelled")
             _write_state(f, st)
-        return self.state(jid)
+        return self.state(jid, owner)
 
     def delete(self, jid: str) -> None:
         st = self.cancel(jid)

@@ -153,9 +153,19 @@ $("fabric").addEventListener("pointerup", (e) => {
 });
 
 // ---- SVG upload ------------------------------------------------------------------------
+let maxBody = 5000000;   // the server's limit on a request's body (GET /api/defaults)
+fetch("/api/defaults").then((r) => r.json()).then((d) => { maxBody = d.max_body || maxBody; })
+  .catch(() => {});
+
 $("svg-file").addEventListener("change", async (e) => {
   const f = e.target.files[0];
   if (!f) return;
+  e.target.value = "";  // the same file again is a new upload
+  if (f.size > maxBody) {
+    showError(`SVG: ${f.name} is ${(f.size / 1e6).toFixed(1)} MB; the page takes files of ` +
+      `at most ${maxBody / 1e6} MB`);
+    return;
+  }
   try {
     const r = await post("/api/pattern/svg", { svg: await f.text(), b: Number($("b").value) });
     setLines(r.lines.map((l) => ({ id: l.id, points: l.points })));
@@ -222,6 +232,7 @@ function showResults(id, st) {
   }
   $("sim-family").textContent = `family: ${m.family}; ${m.newton_iterations} Newton ` +
     `iterations, ${fmt(m.wall_time_s)} s`;
+  loadShape(id);
   const pics = $("pictures");
   pics.innerHTML = "";
   const ul = $("files");
@@ -244,24 +255,132 @@ function showResults(id, st) {
   }
 }
 
+// ---- 3D view of the final shape (canvas, orthographic, painter's algorithm) -------------
+// yaw turns the shape about the vertical (z); elev is the eye's height above the fabric's
+// plane (0: side view, pi/2: top view). The rods lie on top of the fabric (z > 0 side).
+const VIEW0 = { yaw: -0.5, elev: 0.55, zoom: 1 };
+const LIGHT = [-0.6, 0.3, 0.75].map((v, _, a) => v / Math.hypot(...a));  // from above, -x
+const view = Object.assign({ shape: null, drag: null }, VIEW0);
+
+async function loadShape(id) {
+  view.shape = null;
+  render();
+  let shape;
+  try {
+    const r = await fetch(`/api/jobs/${id}/shape`);
+    shape = await r.json();
+    if (!r.ok) throw new Error(shape.error || `HTTP ${r.status}`);
+  } catch (e) { showError(`3D view: ${e.message}`); return; }
+  const pts = shape.rods.flat();
+  const all = pts.length ? pts : shape.fabric.points;
+  if (!all.length) return;
+  const lo = [0, 1, 2].map((k) => all.reduce((m, p) => Math.min(m, p[k]), Infinity));
+  const hi = [0, 1, 2].map((k) => all.reduce((m, p) => Math.max(m, p[k]), -Infinity));
+  view.centre = lo.map((v, k) => (v + hi[k]) / 2);
+  // the rods' bounding box fits in the view whichever way it is turned
+  view.radius = Math.max(Math.hypot(...hi.map((v, k) => v - lo[k])) / 2, 5);
+  view.rodWidth = Number($("b").value) || 1;
+  Object.assign(view, VIEW0);
+  view.shape = shape;
+  render();
+}
+
+function render() {
+  const cv = $("view3d");
+  const ctx = cv.getContext("2d");
+  ctx.clearRect(0, 0, cv.width, cv.height);
+  if (!view.shape) return;
+  const [cx, cy, cz] = view.centre;
+  const cyw = Math.cos(view.yaw), syw = Math.sin(view.yaw);
+  const ce = Math.cos(view.elev), se = Math.sin(view.elev);
+  const s = view.zoom * 0.47 * Math.min(cv.width, cv.height) / view.radius;  // px per mm
+  // screen right = the yawed x; screen up = se * y' + ce * z; depth grows away from the eye
+  const proj = (p) => {
+    const x = p[0] - cx, y = p[1] - cy, z = p[2] - cz;
+    const xr = cyw * x - syw * y, yr = syw * x + cyw * y;
+    const up = se * yr + ce * z, depth = ce * yr - se * z;
+    return [cv.width / 2 + s * xr, cv.height / 2 - s * up, depth];
+  };
+  const F = view.shape.fabric;
+  const P = F.points.map(proj);
+  const items = F.triangles.map((t) => {
+    const [a, b, c] = t.map((i) => F.points[i]);
+    const u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    const v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    const n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    const len = (Math.hypot(...n) || 1) * (n[2] < 0 ? -1 : 1);  // normal up
+    const light = Math.max(0, (n[0] * LIGHT[0] + n[1] * LIGHT[1] + n[2] * LIGHT[2]) / len);
+    return { kind: "tri", t, depth: (P[t[0]][2] + P[t[1]][2] + P[t[2]][2]) / 3, light };
+  });
+  for (const r of view.shape.rods) {
+    const q = r.map(proj);
+    for (let k = 0; k + 1 < q.length; k++) {
+      // a little nearer than the fabric under it, so that it is drawn over it
+      items.push({ kind: "rod", a: q[k], b: q[k + 1], depth: (q[k][2] + q[k + 1][2]) / 2 - 0.3 });
+    }
+  }
+  items.sort((p, q) => q.depth - p.depth);
+  ctx.lineJoin = "round";
+  ctx.lineCap = "round";
+  for (const it of items) {
+    if (it.kind === "tri") {
+      const [a, b, c] = it.t.map((i) => P[i]);
+      const g = Math.round(120 + 130 * it.light);
+      ctx.fillStyle = `rgb(${g}, ${g - 12}, ${g - 30})`;
+      ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.lineTo(c[0], c[1]);
+      ctx.closePath(); ctx.fill();
+      ctx.strokeStyle = "rgba(120, 110, 90, 0.25)"; ctx.lineWidth = 0.5; ctx.stroke();
+    } else {
+      ctx.strokeStyle = "#1b5e9b"; ctx.lineWidth = Math.max(2, s * view.rodWidth);
+      ctx.beginPath(); ctx.moveTo(it.a[0], it.a[1]); ctx.lineTo(it.b[0], it.b[1]); ctx.stroke();
+    }
+  }
+}
+
+$("view3d").addEventListener("pointerdown", (e) => {
+  view.drag = [e.clientX, e.clientY, view.yaw, view.elev];
+  $("view3d").setPointerCapture(e.pointerId);
+});
+$("view3d").addEventListener("pointermove", (e) => {
+  if (!view.drag) return;
+  const [x0, y0, yaw0, elev0] = view.drag;
+  view.yaw = yaw0 + (e.clientX - x0) * 0.01;
+  view.elev = Math.max(0, Math.min(Math.PI / 2, elev0 + (e.clientY - y0) * 0.01));
+  render();
+});
+for (const ev of ["pointerup", "pointercancel"]) {
+  $("view3d").addEventListener(ev, () => { view.drag = null; });
+}
+$("view3d").addEventListener("wheel", (e) => {
+  e.preventDefault();
+  view.zoom = Math.max(0.2, Math.min(20, view.zoom * Math.exp(-e.deltaY * 0.001)));
+  render();
+}, { passive: false });
+$("view3d").addEventListener("dblclick", () => { Object.assign(view, VIEW0); render(); });
+
 $("simulate").addEventListener("click", simulate);
 $("cancel").addEventListener("click", async () => {
   if (job) await fetch(`/api/jobs/${job}`, { method: "DELETE" });
 });
-$("gcode").addEventListener("click", async () => {
+async function download(url, filename, what) {
   try {
-    const r = await fetch("/api/gcode", { method: "POST",
+    const r = await fetch(url, { method: "POST",
       headers: { "Content-Type": "application/json" }, body: JSON.stringify(params()) });
     if (!r.ok) throw new Error((await r.json()).error);
     const blob = await r.blob();
     const a = document.createElement("a");
     a.href = URL.createObjectURL(blob);
-    a.download = "undulate.gcode";
+    a.download = filename;
     document.body.appendChild(a);
     a.click();
     a.remove();
-  } catch (e) { showError(`G-code: ${e.message}`); }
-});
+  } catch (e) { showError(`${what}: ${e.message}`); }
+}
+$("gcode").addEventListener("click", () => download("/api/gcode", "undulate.gcode", "G-code"));
+$("svg-print").addEventListener("click",
+  () => download("/api/drawing?frame=print", "lines-print.svg", "SVG"));
+$("svg-relaxed").addEventListener("click",
+  () => download("/api/drawing?frame=relaxed", "lines-relaxed.svg", "SVG"));
 $("place").addEventListener("click", placeParallel);
 $("clear").addEventListener("click", () => setLines([]));
 for (const k of NUM) $(k).addEventListener("input", () => { draw(); schedulePredict(); });
