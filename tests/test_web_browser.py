@@ -1,8 +1,10 @@
 """End to end in a real headless browser: the page of ``undulate serve`` with the real engine.
 
 Playwright drives Chromium (the system's ``/usr/bin/chromium``, or ``UNDULATE_CHROMIUM``):
-load the page, place lines, see the prediction, draw a line, see a clear error, run a small
-simulation to the end, download its metrics and the G-code. Skipped where no browser is
+load the page, place lines, see the prediction, draw a line, see a clear error, refuse an
+SVG over the size limit with one line, run a small simulation to the end, see its shape in the
+3D view (drawn, turned by a drag, zoomed by the wheel, reset by a double-click), download its
+metrics, the G-code and a drawing. No script errors on the way. Skipped where no browser is
 installed, unless ``UNDULATE_REQUIRE_BROWSER=1`` (CI sets it), where that is a failure.
 """
 
@@ -14,6 +16,7 @@ import shutil
 import socket
 import threading
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -63,11 +66,41 @@ def _set(page, field: str, value: float) -> None:
     page.fill(f"#{field}", str(value))
 
 
+# pixels of the 3D view: drawn (not transparent) and of the rods' colour (#1b5e9b)
+CANVAS_PIXELS = """() => {
+  const cv = document.querySelector('#view3d');
+  const d = cv.getContext('2d').getImageData(0, 0, cv.width, cv.height).data;
+  let drawn = 0, rod = 0;
+  for (let i = 0; i < d.length; i += 4) {
+    if (d[i + 3] > 0) drawn++;
+    if (Math.abs(d[i] - 27) < 12 && Math.abs(d[i + 1] - 94) < 12 && Math.abs(d[i + 2] - 155) < 12)
+      rod++;
+  }
+  return { drawn, rod, total: cv.width * cv.height, url: cv.toDataURL() };
+}"""
+
+
+def _svg_upload(page, size: int) -> None:
+    """Choose an SVG file of ``size`` bytes (a line and a long comment) in the page."""
+    head = ('<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="50mm" '
+            'viewBox="0 0 100 50"><line x1="10" y1="20" x2="60" y2="20"/><!-- ')
+    tail = " --></svg>"
+    body = head + "x" * (size - len(head) - len(tail)) + tail
+    page.set_input_files("#svg-file", files=[{"name": "big.svg", "mimeType": "image/svg+xml",
+                                              "buffer": body.encode()}])
+
+
 def test_page_end_to_end(server: str, tmp_path: Path) -> None:
     with sync_api.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS,
                                      chromium_sandbox=False)
-        page = browser.new_page(accept_downloads=True)
+        page = browser.new_page(accept_downloads=True, viewport={"width": 1500, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+        # (the browser logs each refused request, 4xx, as "Failed to load resource": those
+        # are the bad inputs this test makes on purpose)
+        page.on("console", lambda m: errors.append(f"console: {m.text}") if m.type == "error"
+                and not m.text.startswith("Failed to load resource") else None)
         page.goto(server)
         rows = page.locator("#prediction tbody tr")
         rows.first.wait_for()
@@ -98,6 +131,20 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         page.mouse.move(box["x"] + box["width"] * 0.5, y, steps=5)
         page.mouse.up()
         page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 4")
+        # an SVG over the size limit: one clear line, checked in the page before it is sent...
+        limit = page.evaluate("fetch('/api/defaults').then((r) => r.json())")["max_body"]
+        _svg_upload(page, limit + 1000)
+        page.wait_for_function("document.querySelector('#error').textContent.startsWith('SVG:')")
+        err = page.locator("#error").inner_text()
+        assert "big.svg" in err and f"{limit / 1e6:g} MB" in err and "\n" not in err, err
+        # ... and by the server when the page's own check is off (maxBody: the page's copy)
+        page.evaluate("maxBody = 1e12")
+        _svg_upload(page, limit + 1000)
+        page.wait_for_function(
+            "document.querySelector('#error').textContent.startsWith('SVG: request body')")
+        err = page.locator("#error").inner_text()
+        assert f"{limit:,} bytes" in err and "\n" not in err, err
+        assert page.locator("#prediction tbody tr").count() == 4  # the lines are kept
         # back to one short line and simulate it with the real engine (quick mesh)
         _set(page, "N", 1)
         page.click("#place")
@@ -121,10 +168,41 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         dl.value.save_as(path)
         metrics = json.loads(path.read_text())
         assert metrics["rods"][0]["n"] == n_sim
+        # the final shape in 3D: drawn, with the rod in it
+        page.locator("#view3d").scroll_into_view_if_needed()
+        page.wait_for_function(f"({CANVAS_PIXELS})().drawn > 0")
+        first = page.evaluate(CANVAS_PIXELS)
+        assert first["drawn"] > 0.1 * first["total"] and first["rod"] > 100, first | {"url": ""}
+        # a drag turns it, the wheel zooms, a double-click goes back to the first view
+        box = page.locator("#view3d").bounding_box()
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx + 80, cy + 40, steps=4)
+        page.mouse.up()
+        turned = page.evaluate(CANVAS_PIXELS)
+        assert turned["url"] != first["url"] and turned["drawn"] > 0.05 * turned["total"]
+        page.mouse.wheel(0, -400)
+        page.wait_for_function(f"({CANVAS_PIXELS})().url != {json.dumps(turned['url'])}")
+        zoomed = page.evaluate(CANVAS_PIXELS)
+        assert zoomed["rod"] > turned["rod"], (zoomed["rod"], turned["rod"])
+        page.mouse.dblclick(cx, cy)
+        page.wait_for_function(f"({CANVAS_PIXELS})().url == {json.dumps(first['url'])}")
+        # the drawing of the line in the relaxed fabric: L / (1 + eps0) long
+        with page.expect_download() as dl:
+            page.click("#svg-relaxed")
+        assert dl.value.suggested_filename == "lines-relaxed.svg"
+        svg = tmp_path / "lines-relaxed.svg"
+        dl.value.save_as(svg)
+        pls = ET.parse(svg).getroot().findall(".//{http://www.w3.org/2000/svg}polyline")
+        assert len(pls) == 1
+        xs = [float(p.split(",")[0]) for p in pls[0].get("points").split()]
+        assert max(xs) - min(xs) == pytest.approx(40.0 / 1.5, abs=1e-3)
         with page.expect_download() as dl:
             page.click("#gcode")
         g = tmp_path / "lines.gcode"
         dl.value.save_as(g)
         text = g.read_text()
         assert text.count("\nG1 ") > 3 and "eps0" in text
+        assert errors == [], errors
         browser.close()
