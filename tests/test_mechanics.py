@@ -139,3 +139,35 @@ def test_hinge_kernels_match_autodiff_of_the_energy():
     np.testing.assert_allclose(np.asarray(H), np.asarray(H_ad), atol=1e-9)
     g2 = kernels_for(hinge_bending)["grad"](xall, nodes, k)
     np.testing.assert_allclose(np.asarray(g2), np.asarray(g_ad), atol=1e-10)
+
+
+def test_membrane_kernels_match_autodiff_of_the_energy():
+    """The closed-form neo-Hookean gradient/Hessian equal jax.grad/jax.hessian of the energy,
+    on distorted, stretched, compressed and out-of-plane triangles."""
+    import jax
+    import jax.numpy as jnp
+
+    from undulate.mechanics.assemble import kernels_for
+    from undulate.mechanics.fabric import neo_hookean_membrane
+
+    rng = np.random.default_rng(5)
+    n = 64
+    ref = np.array([[0.0, 0.0], [1.3, 0.1], [0.2, 0.9]])
+    Dm = np.stack([ref[1] - ref[0], ref[2] - ref[0]], axis=1)
+    Dm_inv = np.tile(np.linalg.inv(Dm), (n, 1, 1))
+    stretch = rng.uniform(0.6, 1.6, (n, 1, 3))
+    x = np.c_[ref, np.zeros(3)][None] * stretch + 0.15 * rng.standard_normal((n, 3, 3))
+    params = (jnp.asarray(Dm_inv), jnp.full(n, 0.5 * np.linalg.det(Dm)),
+              jnp.asarray(rng.uniform(0.1, 0.2, n)), jnp.asarray(rng.uniform(0.0, 0.3, n)),
+              jnp.full(n, 0.4))
+    nodes = jnp.arange(3 * n).reshape(n, 3)
+    xall = jnp.asarray(x.reshape(3 * n, 3))
+    g, H = kernels_for(neo_hookean_membrane)["grad_hess"](xall, nodes, *params)
+    g_ad = jax.vmap(jax.grad(neo_hookean_membrane))(jnp.asarray(x), *params)
+    H_ad = jax.vmap(jax.hessian(lambda y, *p: neo_hookean_membrane(y.reshape(3, 3), *p)))(
+        jnp.asarray(x.reshape(n, 9)), *params)
+    scale = float(np.max(np.abs(H_ad)))
+    np.testing.assert_allclose(np.asarray(g), np.asarray(g_ad), atol=1e-12 * scale)
+    np.testing.assert_allclose(np.asarray(H), np.asarray(H_ad), atol=1e-11 * scale)
+    g2 = kernels_for(neo_hookean_membrane)["grad"](xall, nodes, *params)
+    np.testing.assert_allclose(np.asarray(g2), np.asarray(g_ad), atol=1e-12 * scale)

@@ -73,17 +73,45 @@ class ElementGroup:
         self.params = new
         self._pad()
 
+    def _pieces(self) -> list[int]:
+        """Sizes of the kernel calls over the elements: ``chunk`` as often as it fits, then the
+        remainder in falling powers of two down to ``chunk / 8`` (at least 16; the last one
+        padded).
+
+        Few distinct shapes to compile (cached on disk), and little padding: the demo's 3,298
+        membrane triangles ran as 2 x 2048 (24 % padding), now 2048 + 1024 + 256 (1 %). Used
+        only where it saves at least 5 % of the work; ``chunk``-sized calls otherwise.
+        """
+        n, c = self.n_el, self.chunk
+        sizes = [c] * (n // c)
+        r = n - c * (n // c)
+        lo = min(c, max(c // 8, 16))
+        p = c // 2
+        while p >= lo:
+            if r >= p:
+                sizes.append(p)
+                r -= p
+            p //= 2
+        if r > 0:
+            sizes.append(lo)
+        plain = [c] * -(-n // c)
+        # a split pays only where it saves work: extra calls and shapes to compile otherwise
+        return sizes if sum(sizes) <= 0.95 * sum(plain) else plain
+
     def _pad(self) -> None:
         n = self.n_el
-        n_pad = -(-n // self.chunk) * self.chunk
+        self._sizes = self._pieces()
+        n_pad = sum(self._sizes)
         idx = np.concatenate([np.arange(n), np.zeros(n_pad - n, dtype=np.int64)])
         # device arrays, chunked once (no host-to-device copies per evaluation)
         nodes = jnp.asarray(self.nodes[idx])
         params = [jnp.asarray(p[idx]) for p in self.params]
+        starts = np.concatenate([[0], np.cumsum(self._sizes)[:-1]]).astype(int)
         self._chunks = [
-            (nodes[s0 : s0 + self.chunk], tuple(p[s0 : s0 + self.chunk] for p in params))
-            for s0 in range(0, n_pad, self.chunk)
+            (nodes[s0 : s0 + m], tuple(p[s0 : s0 + m] for p in params))
+            for s0, m in zip(starts, self._sizes, strict=True)
         ]
+        self._starts = starts
 
     def run(self, kernel: str, x: jnp.ndarray, *extra, per_element: np.ndarray | None = None
             ) -> list:
@@ -96,12 +124,11 @@ class ElementGroup:
         if per_element is None:
             return [kern(x, nodes, *params, *extra) for nodes, params in self._chunks]
         pe = np.asarray(per_element, dtype=np.float64)
-        n_pad = len(self._chunks) * self.chunk
-        pad = np.zeros((n_pad - self.n_el,) + pe.shape[1:])
-        pe = jnp.asarray(np.concatenate([pe, pad]))
-        c = self.chunk
-        return [kern(x, nodes, *params, pe[i * c : (i + 1) * c], *extra)
-                for i, (nodes, params) in enumerate(self._chunks)]
+        n_pad = sum(self._sizes)
+        pe = np.concatenate([pe, np.zeros((n_pad - self.n_el,) + pe.shape[1:])])
+        return [kern(x, nodes, *params, pe[s0 : s0 + m], *extra)
+                for s0, m, (nodes, params) in zip(self._starts, self._sizes, self._chunks,
+                                                   strict=True)]
 
     @property
     def n_el(self) -> int:
@@ -478,6 +505,15 @@ class Assembly:
         self._indices = urow.astype(np.int32)
         self._indptr = indptr.astype(np.int32)
         self.diag_pos = inv[rows.size - n :]
+        # the full symmetric matrix's CSR pattern and, per entry, the upper entry it copies
+        # (forming it with sparse additions took 2.2 ms per Newton iteration on the demo)
+        pos = sp.csc_matrix((np.arange(1, self.nnz + 1, dtype=np.float64), self._indices,
+                             self._indptr), shape=(n, n))
+        full = (pos + sp.triu(pos, k=1, format="csc").T).tocsr()
+        full.sort_indices()
+        self._full_from_upper = full.data.astype(np.int64) - 1
+        self._full_indices = full.indices
+        self._full_indptr = full.indptr
 
     # ------------------------------------------------------------------ helpers
     def full(self, u: np.ndarray, x_fixed: np.ndarray) -> np.ndarray:
@@ -603,8 +639,11 @@ class Assembly:
         parts = list(_pool().map(one, range(len(self.groups))))
         return sum(p[0] for p in parts), sum(p[1] for p in parts)
 
-    @staticmethod
-    def symmetric(H_upper: sp.csc_matrix) -> sp.csr_matrix:
-        """Full symmetric matrix from its upper triangle."""
-        d = H_upper.diagonal()
-        return (H_upper + H_upper.T - sp.diags(d)).tocsr()
+    def symmetric(self, H_upper: sp.csc_matrix) -> sp.csr_matrix:
+        """Full symmetric matrix from its upper triangle (a Hessian of this assembly's
+        pattern: its entries are copied through a map made once)."""
+        if H_upper.nnz != self.nnz:
+            d = H_upper.diagonal()
+            return (H_upper + H_upper.T - sp.diags(d)).tocsr()
+        return sp.csr_matrix((H_upper.data[self._full_from_upper], self._full_indices,
+                              self._full_indptr), shape=H_upper.shape)
