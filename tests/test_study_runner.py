@@ -53,6 +53,11 @@ def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
     good = next(r for r in recs.values() if r["status"] == "ok")
     assert good["record"]["n_mode"] >= 1 and good["seed"] == 0 and good["attempt"] == 1
     assert good["elapsed_s"] >= 0 and good["case"]["rods"]["h"] in (0.2, 0.6)
+    # which engine ran it (digest of the source) and on how many cores
+    from undulate.study.runner import engine_id
+
+    assert good["engine"] == engine_id() and len(good["engine"]) == 12
+    assert bad["engine"] == good["engine"] and good["cpus"] >= 1
     # artifacts directory passed as `out`
     assert (tmp_path / "artifacts" / good["id"] / "shape.txt").is_file()
     meta = json.loads((tmp_path / "study.json").read_text())
@@ -166,6 +171,7 @@ def test_collect_table(tmp_path: Path) -> None:
     assert (df["dx_rod"] == 2.0).all() and (df["dx_far"] == 6.0).all()
     assert (df["mesh_kind"] == "unstructured").all() and (df["margin_x"] > 0).all()
     assert rec["case_resolved"]["solver"]["max_iter"] >= 1 and rec["version"]
+    assert (df["engine"] == rec["engine"]).all()
 
 
 def test_csv_table_leads_with_the_documented_columns(tmp_path: Path) -> None:

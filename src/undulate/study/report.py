@@ -170,6 +170,11 @@ def _cost_lines(df: pd.DataFrame) -> list[str]:
         hosts = sorted(str(h) for h in df["host"].dropna().unique())
         if hosts:
             out.append(f"| host(s) | {', '.join(hosts)} |")
+    if "engine" in df:
+        eng = df["engine"].fillna("(not recorded)").astype(str).value_counts()
+        if not eng.empty:
+            out.append("| engine(s) (source digest: runs) | "
+                       + ", ".join(f"{k}: {v}" for k, v in eng.items()) + " |")
     return out + [""]
 
 

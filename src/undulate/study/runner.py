@@ -91,7 +91,8 @@ def execute_run(
     """Run one case in the current process; never raises for a failing run.
 
     Returns ``{"status", "record", "error", "traceback", "case_resolved", "started",
-    "finished", "elapsed_s", "host", "pid"}``. This is what worker processes / dask tasks execute.
+    "finished", "elapsed_s", "host", "pid", "engine", "cpus"}``. This is what worker processes
+    / dask tasks execute.
     """
     started = _now()
     t0 = time.perf_counter()
@@ -125,8 +126,19 @@ def execute_run(
         elapsed_s=round(time.perf_counter() - t0, 6),
         host=socket.gethostname(),
         pid=os.getpid(),
+        engine=engine_id(),
+        cpus=os.cpu_count(),
     )
     return result
+
+
+def engine_id() -> str:
+    """A short digest of undulate's source code (and of the JAX installation): the same for
+    every clone of one commit, different after any edit. Stored in each run's record, so a
+    table that grew over several sittings says which runs came from the same engine."""
+    from ..mechanics.compiled import _source_digest
+
+    return _source_digest()[:12]
 
 
 @dataclass
@@ -303,6 +315,8 @@ def run_study(
             "elapsed_s": res.get("elapsed_s"),
             "host": res.get("host"),
             "pid": res.get("pid"),
+            "engine": res.get("engine"),
+            "cpus": res.get("cpus"),
             "artifacts": (f"artifacts/{r.id}" if artifacts else None),
         }
         write_record(out, rec)
