@@ -204,5 +204,18 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         dl.value.save_as(g)
         text = g.read_text()
         assert text.count("\nG1 ") > 3 and "eps0" in text
+        # a reload shows this browser's latest job again, results and 3D view included...
+        page.reload()
+        page.wait_for_function("document.querySelector('#job-status').dataset.status == 'done'")
+        page.wait_for_function("document.querySelectorAll('#sim-table tbody tr').length == 1")
+        again = page.locator("#sim-table tbody tr").nth(0).locator("td").nth(1).inner_text()
+        assert int(again) == n_sim
+        page.wait_for_function(f"({CANVAS_PIXELS})().drawn > 0")
+        # ... and another browser (no cookie of this one) sees no job
+        other = browser.new_context().new_page()
+        other.goto(server)
+        other.locator("#prediction tbody tr").first.wait_for()
+        assert other.evaluate("fetch('/api/jobs').then((r) => r.json())") == []
+        assert other.locator("#job").is_hidden()
         assert errors == [], errors
         browser.close()

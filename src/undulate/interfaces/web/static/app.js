@@ -385,4 +385,29 @@ $("place").addEventListener("click", placeParallel);
 $("clear").addEventListener("click", () => setLines([]));
 for (const k of NUM) $(k).addEventListener("input", () => { draw(); schedulePredict(); });
 
+// ---- after a reload: this browser's latest job again (the server keeps its jobs) ---------
+async function restoreLatestJob() {
+  let st;
+  try {
+    const r = await fetch("/api/jobs");
+    const list = await r.json();
+    if (!r.ok || !list.length || job) return;
+    const latest = list[list.length - 1];  // the list is oldest first
+    const rs = await fetch(`/api/jobs/${latest.id}`);
+    st = await rs.json();
+    if (!rs.ok) return;
+  } catch (e) { return; }
+  $("job").hidden = false;
+  showJob(st);
+  if (["queued", "running"].includes(st.status)) {
+    job = st.id;
+    $("simulate").disabled = true;
+    $("cancel").hidden = false;
+    pollTimer = setInterval(poll, 500);
+  } else if (st.status === "done") {
+    showResults(st.id, st);
+  }
+}
+
 placeParallel();
+restoreLatestJob();
