@@ -171,3 +171,39 @@ def test_membrane_kernels_match_autodiff_of_the_energy():
     np.testing.assert_allclose(np.asarray(H), np.asarray(H_ad), atol=1e-11 * scale)
     g2 = kernels_for(neo_hookean_membrane)["grad"](xall, nodes, *params)
     np.testing.assert_allclose(np.asarray(g2), np.asarray(g_ad), atol=1e-12 * scale)
+
+
+def test_element_groups_split_into_calls_and_empty_groups():
+    """Kernel calls cover every element once (padding only at the end), an empty group is
+    allowed, and the full symmetric Hessian from the map equals H + H^T - diag(H) and does not
+    share its index arrays with the assembly."""
+    import scipy.sparse as sp
+
+    from undulate.mechanics.assemble import Assembly, ElementGroup
+    from undulate.mechanics.fabric import hinge_bending, winkler_foundation
+
+    for n in (0, 1, 15, 99, 129, 495, 3298, 4895):
+        g = ElementGroup("t", hinge_bending, np.zeros((n, 4), int), (np.ones(n),))
+        assert sum(g._sizes) >= n and sum(g._sizes) - n < max(g._sizes, default=1)
+        assert [len(c[0]) for c in g._chunks] == g._sizes
+        assert list(g._starts) == list(np.cumsum([0, *g._sizes])[:-1])
+    assert ElementGroup("t", hinge_bending, np.zeros((3298, 4), int),
+                        (np.ones(3298),))._sizes == [2048, 1024, 256]
+    # an assembly with an empty group next to a real one
+    rng = np.random.default_rng(0)
+    n_nodes = 40
+    x = rng.standard_normal((n_nodes, 3))
+    hinges = np.array([rng.choice(n_nodes, 4, replace=False) for _ in range(60)])
+    groups = [ElementGroup("bend", hinge_bending, hinges, (rng.uniform(0.5, 2, 60),)),
+              ElementGroup("none", winkler_foundation, np.zeros((0, 1), int),
+                           (np.zeros(0), np.zeros(0)))]
+    fixed = np.zeros((n_nodes, 3), bool)
+    fixed[:2] = True
+    asm = Assembly(n_nodes, groups, fixed)
+    _, H = asm.gradient_hessian(x)
+    S = asm.symmetric(H)
+    ref = (H + H.T - sp.diags(H.diagonal())).tocsr()
+    assert abs(S - ref).max() == 0.0
+    S.data[:] = 0.0
+    S.eliminate_zeros()  # a caller's structural change must not reach the next call
+    assert abs(asm.symmetric(H) - ref).max() == 0.0

@@ -58,6 +58,18 @@ def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
 
     assert good["engine"] == engine_id() and len(good["engine"]) == 12
     assert bad["engine"] == good["engine"] and good["cpus"] >= 1
+    # a failure of the label itself never fails a run (execute_run never raises)
+    import undulate.study.runner as R
+
+    R.engine_id.cache_clear()
+    real = R.ENGINE_PARTS
+    R.ENGINE_PARTS = None  # iterating it raises inside engine_id
+    try:
+        assert R.engine_id() is None
+    finally:
+        R.ENGINE_PARTS = real
+        R.engine_id.cache_clear()
+    assert R.engine_id() == good["engine"]
     # artifacts directory passed as `out`
     assert (tmp_path / "artifacts" / good["id"] / "shape.txt").is_file()
     meta = json.loads((tmp_path / "study.json").read_text())
@@ -212,3 +224,13 @@ def test_unresolvable_runner_fails_fast(tmp_path: Path) -> None:
     with pytest.raises(StudyError, match="cannot import"):
         run_study(_small_study([0.2]), tmp_path, run_fn="no_such_module:f", progress=False)
     assert not list((tmp_path / "runs").glob("*.json"))
+
+
+def test_report_counts_runs_per_engine_old_records_included() -> None:
+    """Records written before the engine was kept show as "(not recorded)" beside the rest."""
+    from undulate.study.report import _cost_lines
+
+    df = pd.DataFrame({"status": ["ok", "ok", "ok"], "elapsed_s": [1.0, 2.0, 3.0],
+                       "engine": [None, "abc123def456", "abc123def456"]})
+    line = next(t for t in _cost_lines(df) if t.startswith("| engine"))
+    assert "abc123def456: 2" in line and "(not recorded): 1" in line

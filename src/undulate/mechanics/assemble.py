@@ -2,10 +2,11 @@
 
 An :class:`ElementGroup` is one pure per-element energy function plus, for every element, the
 node indices it reads and its parameters. The total energy is the sum over groups and elements.
-Gradients and element Hessians come from JAX autodiff (``jax.grad``/``jax.hessian`` under
-``jax.vmap``), one jitted call per group. Element Hessians are scattered into a sparse pattern
-that is fixed for the mesh (computed once), so the sparse factorization's symbolic analysis can
-be reused across Newton iterations and load steps.
+Gradients and element Hessians come from JAX (``jax.grad``/``jax.hessian`` under ``jax.vmap``,
+or closed forms and chain rules an energy function declares itself: the membrane, the hinges,
+the rods' strain forms), jitted calls per group. Element Hessians are scattered into a sparse
+pattern that is fixed for the mesh (computed once), so the sparse factorization's symbolic
+analysis can be reused across Newton iterations and load steps.
 
 Node slots may repeat inside an element (e.g. at rod ends): autodiff and the scatter-add both
 sum such contributions, which is exactly the derivative of the composed function.
@@ -106,7 +107,7 @@ class ElementGroup:
         # device arrays, chunked once (no host-to-device copies per evaluation)
         nodes = jnp.asarray(self.nodes[idx])
         params = [jnp.asarray(p[idx]) for p in self.params]
-        starts = np.concatenate([[0], np.cumsum(self._sizes)[:-1]]).astype(int)
+        starts = np.concatenate([[0], np.cumsum(self._sizes)])[:-1].astype(np.int64)
         self._chunks = [
             (nodes[s0 : s0 + m], tuple(p[s0 : s0 + m] for p in params))
             for s0, m in zip(starts, self._sizes, strict=True)
@@ -642,8 +643,14 @@ class Assembly:
     def symmetric(self, H_upper: sp.csc_matrix) -> sp.csr_matrix:
         """Full symmetric matrix from its upper triangle (a Hessian of this assembly's
         pattern: its entries are copied through a map made once)."""
-        if H_upper.nnz != self.nnz:
+        same = (H_upper.nnz == self.nnz and H_upper.shape == (self.n_free, self.n_free)
+                and (np.shares_memory(H_upper.indptr, self._indptr)
+                     or (np.array_equal(H_upper.indptr, self._indptr)
+                         and np.array_equal(H_upper.indices, self._indices))))
+        if not same:
             d = H_upper.diagonal()
             return (H_upper + H_upper.T - sp.diags(d)).tocsr()
-        return sp.csr_matrix((H_upper.data[self._full_from_upper], self._full_indices,
-                              self._full_indptr), shape=H_upper.shape)
+        # the index arrays are copied: a caller's in-place change of the result's structure
+        # (eliminate_zeros, prune) must not reach the map
+        return sp.csr_matrix((H_upper.data[self._full_from_upper], self._full_indices.copy(),
+                              self._full_indptr.copy()), shape=H_upper.shape)

@@ -58,7 +58,7 @@ def _membrane_grad_hess(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
 
         dP = mu dF + lam2 (G : dF) G + (lam2 lnJ - mu) (dF C^-1 - G dF^T G - G F^T dF C^-1).
 
-    F = x^T D with D (3 nodes, 2) = [-1 -1; 1 0; 0 1] Dm^-1, so node k's force is t A0 P D[k]
+    F = x^T D with D (3 nodes, 2) = [-1 -1; 1 0; 0 1] Dm^-1, so node k's gradient is t A0 P D[k]
     and the Hessian block (k, l) is t A0 sum_ab D[k, a] dP_ia/dF_jb D[l, b]. Checked against
     autodiff of the energy in the tests; 3.4 times faster than ``jax.hessian`` of it (4,096
     triangles: 3.5 ms against 11.8 ms, CPU).

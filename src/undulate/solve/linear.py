@@ -110,7 +110,7 @@ class LUSolver:
 
 @cache
 def _mkl_pardiso():
-    """MKL's ``pardiso`` entry point, located through pypardiso (extra ``fast``); None if absent."""
+    """MKL's ``pardiso`` entry point (:func:`_mkl_library`; extra ``fast``); None if absent."""
     # Intel OpenMP's threads spin for 200 ms after each parallel region by default, taking a
     # core from the assembly that follows (two single-rod runs, h = 0.2, at once on 2 cores,
     # PARDISO on 2 threads: 30.1 s with the spin, 25.3 s without; 32.1 s on one thread). Read
@@ -134,9 +134,11 @@ def _mkl_pardiso():
 def _mkl_library() -> ctypes.CDLL | None:
     """MKL's runtime library (``mkl_rt``, from the ``mkl`` wheel that pypardiso pulls), or None.
 
-    Looked up where the wheel puts it (``<prefix>/lib`` or ``<prefix>/Library/bin``), then in
-    the wheel's file list; pypardiso's own search is the last resort: it globs the whole
-    environment recursively, which took 1.4 s of every run's start (measured on the demo).
+    In order: the file ``PYPARDISO_MKL_RT`` names (pypardiso's own setting); the ``mkl`` wheel's
+    file list; ``<prefix>/lib`` and ``<prefix>/Library/bin`` of this environment, its base and
+    (when enabled) the user site; pypardiso's own search last: it globs the whole environment
+    recursively, which took 1.4 s of every run's start (measured on the demo). A library
+    without a ``pardiso`` entry point is skipped.
     """
     import glob
     from importlib.util import find_spec
@@ -147,24 +149,28 @@ def _mkl_library() -> ctypes.CDLL | None:
     import sys
 
     cands: list[str] = []
-    for base in dict.fromkeys([sys.prefix, sys.base_prefix, site.USER_BASE or ""]):
-        if base:
-            cands += sorted(glob.glob(os.path.join(base, "lib", "libmkl_rt.so*")), key=len)
-            cands += sorted(glob.glob(os.path.join(base, "Library", "bin", "mkl_rt*.dll")),
-                            key=len)
-    if not cands:
-        try:
-            from importlib.metadata import PackageNotFoundError, distribution
+    if os.environ.get("PYPARDISO_MKL_RT"):
+        cands.append(os.environ["PYPARDISO_MKL_RT"])
+    try:
+        from importlib.metadata import PackageNotFoundError, distribution
 
-            files = distribution("mkl").files or []
-            cands = sorted((str(f.locate()) for f in files if "mkl_rt" in f.name), key=len)
-        except (PackageNotFoundError, ImportError):
-            pass
-    for path in cands:
+        files = distribution("mkl").files or []
+        cands += sorted((str(f.locate()) for f in files if "mkl_rt" in f.name), key=len)
+    except (PackageNotFoundError, ImportError):
+        pass
+    bases = [sys.prefix, sys.base_prefix]
+    if site.ENABLE_USER_SITE and getattr(site, "USER_BASE", None):
+        bases.append(site.USER_BASE)
+    for base in dict.fromkeys(glob.escape(b) for b in bases if b):
+        cands += sorted(glob.glob(os.path.join(base, "lib", "libmkl_rt.so*")), key=len)
+        cands += sorted(glob.glob(os.path.join(base, "Library", "bin", "mkl_rt*.dll")), key=len)
+    for path in dict.fromkeys(cands):
         try:
-            return ctypes.CDLL(path)
+            lib = ctypes.CDLL(path)
         except OSError:
             continue
+        if hasattr(lib, "pardiso"):
+            return lib
     try:
         from pypardiso.pardiso_wrapper import PyPardisoSolver
 
@@ -228,7 +234,7 @@ class PardisoSolver:
         self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's opaque handle
         self._iparm = np.zeros(64, dtype=np.int32)
         # iparm(34): reproducible results for this many threads (MKL's CNR mode).
-        # iparm(2) = 0: minimum-degree (AMD) ordering. On this project's Hessians it fills
+        # iparm(2) = 0: minimum-degree ordering. On this project's Hessians it fills
         # less than METIS (iparm(2) = 2): five rods at s = 50 (21,063 unknowns) 645 against
         # 846 Mflop per factorization, nnz(L) 3.09 M against 3.45 M; the demo 119 against 140
         # Mflop; one 5 mm rod 33 against 43; five rods at s = 10 849 against 809 (the one case
@@ -330,7 +336,7 @@ def auto_choice(n: int, pardiso: bool | None = None, qdldl: bool | None = None) 
     if n < AUTO_PARDISO_N and qdldl:
         return "qdldl"
     if pardiso is None:
-        # only asked for larger matrices: locating MKL (pypardiso globs its install) takes ~2 s
+        # only asked for larger matrices: loading MKL takes a moment and memory
         pardiso = pardiso_available()
     if pardiso:
         return "pardiso"

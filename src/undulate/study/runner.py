@@ -12,6 +12,7 @@ most the runs that were in flight; re-running the same command resumes.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import multiprocessing
 import os
@@ -127,18 +128,51 @@ def execute_run(
         host=socket.gethostname(),
         pid=os.getpid(),
         engine=engine_id(),
-        cpus=os.cpu_count(),
+        cpus=usable_cpus(),
     )
     return result
 
 
-def engine_id() -> str:
-    """A short digest of undulate's source code (and of the JAX installation): the same for
-    every clone of one commit, different after any edit. Stored in each run's record, so a
-    table that grew over several sittings says which runs came from the same engine."""
-    from ..mechanics.compiled import _source_digest
+#: the packages whose code decides a run's numbers (not the interfaces, studies, figures)
+ENGINE_PARTS = ("mechanics", "mesh", "model", "solve", "analysis")
 
-    return _source_digest()[:12]
+
+@functools.cache
+def engine_id() -> str | None:
+    """A short digest of what decides a run's numbers: the source of undulate's engine
+    (:data:`ENGINE_PARTS`), the JAX version, which sparse solvers are installed and PARDISO's
+    thread count (``UNDULATE_PARDISO_THREADS``). The same for every clone of one commit on the
+    same installation; an edit of the web page or the CLI does not change it. Stored in each
+    run's record, so a table that grew over several sittings says which runs came from the
+    same engine. None if it cannot be computed (never raises)."""
+    try:
+        import hashlib
+
+        import jax
+        import jaxlib
+
+        from ..solve.linear import _qdldl_available, pardiso_available, pardiso_threads
+
+        root = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for part in ENGINE_PARTS:
+            for p in sorted((root / part).rglob("*.py")):
+                h.update(p.relative_to(root).as_posix().encode())
+                h.update(p.read_bytes())
+        h.update(f"jax {jax.__version__} jaxlib {jaxlib.__version__} pardiso "
+                 f"{pardiso_available()} threads {pardiso_threads()} qdldl "
+                 f"{_qdldl_available()}".encode())
+        return h.hexdigest()[:12]
+    except Exception:  # noqa: BLE001 (a run's record must not fail for its label)
+        return None
+
+
+def usable_cpus() -> int | None:
+    """Cores this process may run on (its affinity, where the system tells), else all."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count()
 
 
 @dataclass
@@ -439,10 +473,13 @@ def _run_pool(
             break
 
 
-def _crash_result(error: str) -> dict[str, Any]:
+def _crash_result(error: str, local: bool = True) -> dict[str, Any]:
     now = _now()
+    # a local worker that died ran this process's code: its engine and cores are ours (a
+    # remote, dask, worker's are unknown)
     return {"status": "failed", "record": None, "error": error, "traceback": None,
-            "started": None, "finished": now, "elapsed_s": None, "host": None, "pid": None}
+            "started": None, "finished": now, "elapsed_s": None, "host": None, "pid": None,
+            "engine": engine_id() if local else None, "cpus": usable_cpus() if local else None}
 
 
 def _run_dask(
@@ -476,7 +513,7 @@ def _run_dask(
                 try:
                     res = fut.result()
                 except Exception as err:  # KilledWorker, lost worker, ...
-                    res = _crash_result(f"{type(err).__name__}: {err}")
+                    res = _crash_result(f"{type(err).__name__}: {err}", local=False)
                 bar.running -= 1
                 finish(r, res)
         except BaseException:
