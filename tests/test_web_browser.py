@@ -161,7 +161,9 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         n_sim = int(sim.nth(0).locator("td").nth(1).inner_text())
         assert n_sim >= 1
         page.locator("#pictures img").first.wait_for()
-        assert page.evaluate("document.querySelector('#pictures img').naturalWidth") > 100
+        # the picture loads after the element appears: wait for it (a fixed read raced)
+        page.wait_for_function("document.querySelector('#pictures img').complete && "
+                               "document.querySelector('#pictures img').naturalWidth > 100")
         with page.expect_download() as dl:
             page.click("#files a[download='metrics.json']")
         path = tmp_path / "metrics.json"
