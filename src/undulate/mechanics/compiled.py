@@ -42,13 +42,16 @@ def cache_root() -> Path | None:
 
 
 @functools.cache
-def _source_digest() -> str:
-    """Digest of undulate's source files and of the JAX installation (part of every key)."""
+def _source_digest(parts: tuple[str, ...] | None = None) -> str:
+    """Digest of undulate's source files (all of them, or those below the sub-packages
+    ``parts``) and of the JAX installation (part of every key)."""
     import jaxlib
 
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for p in sorted(root.rglob("*.py")):
+    files = (sorted(root.rglob("*.py")) if parts is None
+             else [p for part in parts for p in sorted((root / part).rglob("*.py"))])
+    for p in files:
         h.update(p.relative_to(root).as_posix().encode())
         h.update(p.read_bytes())
     h.update(f"jax {jax.__version__} jaxlib {jaxlib.__version__}".encode())

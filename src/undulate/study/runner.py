@@ -148,21 +148,13 @@ def engine_id() -> str | None:
     try:
         import hashlib
 
-        import jax
-        import jaxlib
-
+        from ..mechanics.compiled import _source_digest
         from ..solve.linear import _qdldl_available, pardiso_available, pardiso_threads
 
-        root = Path(__file__).resolve().parents[1]
-        h = hashlib.sha256()
-        for part in ENGINE_PARTS:
-            for p in sorted((root / part).rglob("*.py")):
-                h.update(p.relative_to(root).as_posix().encode())
-                h.update(p.read_bytes())
-        h.update(f"jax {jax.__version__} jaxlib {jaxlib.__version__} pardiso "
-                 f"{pardiso_available()} threads {pardiso_threads()} qdldl "
-                 f"{_qdldl_available()}".encode())
-        return h.hexdigest()[:12]
+        solvers = (f"pardiso {pardiso_available()} threads {pardiso_threads()} qdldl "
+                   f"{_qdldl_available()}")
+        both = f"{_source_digest(tuple(ENGINE_PARTS))} {solvers}"
+        return hashlib.sha256(both.encode()).hexdigest()[:12]
     except Exception:  # noqa: BLE001 (a run's record must not fail for its label)
         return None
 
