@@ -111,3 +111,10 @@ def crash_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, 
         os._exit(3)
     time.sleep(1.0)
     return metrics(case)
+
+
+def threads_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, Any]:
+    """Records the PARDISO thread count its process was given (``UNDULATE_PARDISO_THREADS``)."""
+    rec = metrics(case)
+    rec["pardiso_threads_env"] = os.environ.get("UNDULATE_PARDISO_THREADS")
+    return rec

@@ -138,6 +138,29 @@ def test_process_pool_matches_in_process(tmp_path: Path) -> None:
     assert not (tmp_path / "pool" / "artifacts").exists()
 
 
+def test_workers_share_the_cores_for_pardiso(tmp_path: Path, monkeypatch) -> None:
+    """Pool workers factor with their share of the cores (threads never outnumber cores),
+    unless the user set UNDULATE_PARDISO_THREADS, which they then keep."""
+    from undulate.study.runner import usable_cpus, worker_pardiso_threads
+
+    assert worker_pardiso_threads(2, cpus=2) == 1
+    assert worker_pardiso_threads(1, cpus=2) == 2
+    assert worker_pardiso_threads(4, cpus=16) == 4
+    assert worker_pardiso_threads(8, cpus=2) == 1
+    study = _small_study([0.2, 0.3])
+    monkeypatch.delenv("UNDULATE_PARDISO_THREADS", raising=False)
+    run_study(study, tmp_path / "a", run_fn="_study_fakes:threads_run", workers=2,
+              progress=False, artifacts=False)
+    want = str(max(1, (usable_cpus() or 1) // 2))
+    assert {r["record"]["pardiso_threads_env"] for r in _records(tmp_path / "a").values()} == {
+        want}
+    monkeypatch.setenv("UNDULATE_PARDISO_THREADS", "3")
+    run_study(study, tmp_path / "b", run_fn="_study_fakes:threads_run", workers=2,
+              progress=False, artifacts=False)
+    assert {r["record"]["pardiso_threads_env"] for r in _records(tmp_path / "b").values()} == {
+        "3"}
+
+
 def test_string_runner_and_worker_crash(tmp_path: Path) -> None:
     study = _small_study([0.3, 0.5, 0.7])
     s = run_study(study, tmp_path, run_fn="_study_fakes:crash_run", workers=2, progress=False,

@@ -384,11 +384,26 @@ def run_study(
     return summary
 
 
-def _init_worker(path: list[str]) -> None:
-    """Give spawned workers the driver's import path (so 'module:function' runners resolve)."""
+def worker_pardiso_threads(workers: int, cpus: int | None = None) -> int:
+    """PARDISO threads for each of ``workers`` processes sharing ``cpus`` cores (default: the
+    usable cores): ``max(1, cpus // workers)``, so that the workers' threads never outnumber
+    the cores. PARDISO's threads wait for each other at every step of a factorization; with
+    more threads than cores they wait for threads that are not running. Measured: two
+    five-rod runs (h = 0.3, s = 15 and 20) at once on 2 cores took 72.7 and 76.7 s with two
+    PARDISO threads each, 56.6 and 62.1 s with one (docs/benchmarks.md)."""
+    n = cpus if cpus is not None else (usable_cpus() or 1)
+    return max(1, n // max(1, workers))
+
+
+def _init_worker(path: list[str], pardiso_threads: int | None = None) -> None:
+    """Give spawned workers the driver's import path (so 'module:function' runners resolve)
+    and, unless the user chose one (``UNDULATE_PARDISO_THREADS``), their share of the cores
+    as PARDISO's thread count (set before the engine loads MKL)."""
     for p in reversed(path):
         if p not in sys.path:
             sys.path.insert(0, p)
+    if pardiso_threads is not None:
+        os.environ.setdefault("UNDULATE_PARDISO_THREADS", str(pardiso_threads))
 
 
 def _run_pool(
@@ -414,7 +429,7 @@ def _run_pool(
     while queue:
         # spawn, not fork: the engine uses JAX, which is multithreaded (fork can deadlock)
         pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                   initargs=(list(sys.path),),
+                                   initargs=(list(sys.path), worker_pardiso_threads(workers)),
                                    mp_context=multiprocessing.get_context("spawn"))
         inflight: dict[Future, RunSpec] = {}
         broken = False
