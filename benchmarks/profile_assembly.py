@@ -34,7 +34,7 @@ def _mean(fn, n: int = 5) -> float:
 def main() -> None:
     sim = prepare(api.demo_case())
     x_print, _ = prestretch(sim, NewtonOptions(force_scale=sim.force_scale))
-    rods = rod_groups(sim.mesh.rods, x_print, sim.section)
+    rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), bool)
     fixed[_clamped(sim.mesh)] = True
     asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods, fixed)

@@ -31,6 +31,9 @@ dx_far = 4.0
 """
 
 
+_PAT = "Patterns (`undulate run --pattern`, `[pattern]`)"
+
+
 def _gcode_args(d: Path, *opts: str) -> list[str]:
     (d / "case.toml").write_text(TINY)
     return ["gcode", "case.toml", "--out", "case.gcode", *opts]
@@ -247,6 +250,63 @@ CASES: list[ErrorCase] = [
               "`UNDULATE_PARDISO_THREADS=0`", lambda d: ["theory", "--h", "0.3"],
               ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
               env=(("UNDULATE_PARDISO_THREADS", "0"),)),
+    # ---- patterns -----------------------------------------------------------------------
+    ErrorCase("pattern-cross", _PAT,
+              "`--pattern` with crossing lines",
+              lambda d: (d / "x.svg").write_text(
+                  '<svg xmlns="http://www.w3.org/2000/svg" width="100mm" height="100mm" '
+                  'viewBox="0 0 100 100"><line id="a" x1="0" y1="50" x2="100" y2="50"/>'
+                  '<line id="b" x1="50" y1="0" x2="50" y2="100"/></svg>')
+              and ["run", "--pattern", "x.svg", "--out", "out"],
+              ("x.svg: pattern: lines a and b: cross at (0, 0) mm",)),
+    ErrorCase("pattern-text", _PAT,
+              "a drawing with a text element",
+              lambda d: (d / "x.svg").write_text(
+                  '<svg xmlns="http://www.w3.org/2000/svg"><line x1="0" y1="0" x2="90" y2="0"/>'
+                  '<text id="label">hi</text></svg>')
+              and ["run", "--pattern", "x.svg", "--out", "out"],
+              ("x.svg: svg: a text element 'label' is not a line",)),
+    ErrorCase("pattern-missing", _PAT,
+              "`--pattern` names no file",
+              lambda d: ["run", "--pattern", "nope.svg", "--out", "out"],
+              ("nope.svg: svg: cannot read",)),
+    ErrorCase("pattern-self", _PAT,
+              "a line that crosses itself",
+              _case_file('[[pattern.lines]]\nid = "z"\n'
+                         'points = [[0, 0], [30, 0], [30, 30], [15, -15]]\n'),
+              ("pattern: line z: crosses itself at",)),
+    ErrorCase("pattern-gap", _PAT,
+              "two lines closer than `min_gap`",
+              _case_file('[pattern]\nmin_gap = 3.0\nlines = [\n'
+                         '  { id = "a", points = [[-20, 0], [20, 0]] },\n'
+                         '  { id = "b", points = [[-20, 3], [20, 3]] },\n]\n'),
+              ("pattern: lines a and b: 2 mm apart edge to edge", "minimum gap 3 mm")),
+    ErrorCase("pattern-bend", _PAT,
+              "a bend too tight for the rod",
+              _case_file('[[pattern.lines]]\nid = "v"\npoints = [[-20, 0], [0, 20], [20, 0]]\n'),
+              ("pattern: line v: bends with a radius of", "max(b, 3 x mesh.dx_rod) = 3 mm")),
+    ErrorCase("pattern-zero", _PAT,
+              "a line of zero length",
+              _case_file('[[pattern.lines]]\nid = "dot"\npoints = [[5, 5], [5, 5]]\n'),
+              ("pattern: line dot: has zero length",)),
+    ErrorCase("pattern-arc", _PAT,
+              "an arc and points in one line",
+              _case_file('[[pattern.lines]]\npoints = [[0, 0], [30, 0]]\n'
+                         'arc = { centre = [0, 0], radius = 20, start = 0, end = 90 }\n'),
+              ("pattern.lines.0: give exactly one of points (a polyline) or arc",)),
+    ErrorCase("pattern-rods", _PAT,
+              "a pattern with `rods.N`",
+              _case_file('[rods]\nN = 3\n[[pattern.lines]]\npoints = [[0, 0], [30, 0]]\n'),
+              ("pattern: rods.N cannot be given together with a pattern",)),
+    ErrorCase("pattern-structured", _PAT,
+              "a pattern on the structured mesh",
+              _case_file('[mesh]\nkind = "structured"\n[[pattern.lines]]\n'
+                         'points = [[0, 0], [30, 0]]\n'),
+              ("mesh.kind: 'structured' takes rods along x",)),
+    ErrorCase("pattern-scale", _PAT,
+              "`pattern.scale` without a file",
+              _case_file('[pattern]\nscale = 2.0\n'),
+              ("pattern.scale: only with pattern.file",)),
     # ---- gcode --------------------------------------------------------------------------
     ErrorCase("gcode-bed", "Print files (`undulate gcode`)", "a bed too small for the lines",
               lambda d: _gcode_args(d, "--bed-x", "15"), ("outside the 15 x 220 mm bed",)),

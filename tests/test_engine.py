@@ -26,10 +26,10 @@ def small_result():
 
 def test_small_rod_buckles_out_of_plane(small_result):
     r = small_result
-    z = r.centerlines[0][:, 2] - r.section.offset
+    z = r.centerlines[0][:, 2] - r.sections[0].offset
     assert np.max(np.abs(z)) > 2.0  # well beyond the 1 um imperfection
     # the printed state is flat and stress-free for the rod
-    assert np.allclose(r.centerlines_printed[0][:, 2], r.section.offset)
+    assert np.allclose(r.centerlines_printed[0][:, 2], r.sections[0].offset)
     # the rod hardly changes length (inextensible compared with the fabric)
     seg = np.linalg.norm(np.diff(r.centerlines[0], axis=0), axis=1).sum()
     seg0 = np.linalg.norm(np.diff(r.centerlines_printed[0], axis=0), axis=1).sum()
@@ -116,7 +116,7 @@ def test_default_single_rod_buckles_into_waves():
     r = api.simulate(api.demo_case())
     ana = api.analyse(r)
     rod = ana["rods"][0]
-    z = r.centerlines[0][:, 2] - r.section.offset
+    z = r.centerlines[0][:, 2] - r.sections[0].offset
     sign_changes = np.count_nonzero(np.diff(np.sign(z[np.abs(z) > 0.05])) != 0)
     assert sign_changes >= 2
     assert r.history[0]["max_height"] < 0.01

@@ -11,7 +11,7 @@ from undulate.api import ONSET_DEFLECTION, onset
 
 
 def _result(history, h=0.3, n_rods=2):
-    return SimpleNamespace(history=history, section=SimpleNamespace(h=h),
+    return SimpleNamespace(history=history, sections=[SimpleNamespace(h=h)] * n_rods,
                            centerlines=[np.zeros((3, 3))] * n_rods)
 
 

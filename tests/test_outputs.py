@@ -143,7 +143,7 @@ def test_overwrite_replaces_the_previous_run(tmp_path: Path) -> None:
     _run(tmp_path, out, "--overwrite")
     names = sorted(p.name for p in out.iterdir())
     assert names == ["centerlines.npz", "final.vtu", "metrics.json", "printed.vtu",
-                     "rod_0_fits.png", "rod_0_side.png"]
+                     "rod_0_fits.png", "rod_0_side.png", "top_view.png", "view_3d.png"]
     assert "old" not in json.loads((out / "metrics.json").read_text())
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".run.")]
 

@@ -48,7 +48,10 @@ def test_svg_units_curves_and_transforms(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("svg", "needle"), [
     ('<circle id="c" cx="5" cy="5" r="2"/>', "line c: a closed circle"),
     ('<path id="z" d="M0 0 L 10 0 L 10 10 Z"/>', "line z: a closed path"),
-    ('<text x="0" y="0">hi</text>', "holds no lines"),
+    ('<text x="0" y="0">hi</text>', "a text element is not a line"),
+    ('<line x1="0" y1="0" x2="9" y2="0"/><text id="t" x="0" y="0">hi</text>',
+     "a text element 't' is not a line"),
+    ('<g/>', "holds no lines"),
 ])
 def test_svg_refusals(svg: str, needle: str) -> None:
     with pytest.raises(PatternError, match=needle):

@@ -63,7 +63,9 @@ def analyse(result: SimResult) -> dict[str, Any]:
 
     # nominal (printed) lengths, one per rod in the order of the centre lines; the measured
     # ones are kept beside them (L_nominal, L_measured)
-    return analyse_run(result.centerlines, L=[seg[2] for seg in result.case.segments()])
+    paths = result.case.rod_paths()
+    return analyse_run(result.centerlines, L=[p.length for p in paths],
+                       along=["principal" if p.straight else "arclength" for p in paths])
 
 
 def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
@@ -77,8 +79,8 @@ def _flat_record(result: SimResult, ana: dict[str, Any]) -> dict[str, Any]:
         "wall_time_s": st.get("wall_time_s"),
         "n_unknowns": st.get("n_unknowns"),
         "family": ana["family"],
-        "max_height": max(float(c[:, 2].max()) for c in result.centerlines)
-        - result.section.offset,
+        "max_height": max(float(c[:, 2].max()) - sk.offset
+                          for c, sk in zip(result.centerlines, result.sections, strict=True)),
     }
     rec.update(ana["summary"])
     ns = [r["n"] for r in ana["rods"]]
@@ -125,15 +127,19 @@ def onset(result: SimResult) -> dict[str, Any]:
     Resolution: the increments before the onset, eps0 / (steps x release.onset_substeps).
     """
     hist = result.history
-    thr = ONSET_DEFLECTION * result.section.h
+    hs = [sk.h for sk in result.sections]
     strains = [h["release_strain"] for h in hist]
     unstable = next((h["release_strain"] for h in hist if h.get("negative_steps", 0) > 0), None)
-    first = _crossing(strains, [h.get("max_deflection", 0.0) for h in hist], thr)
     per_rod = []
     for k in range(len(result.centerlines)):
         per_rod.append(_crossing(strains, [h["rod_max_deflection"][k]
                                            if len(h.get("rod_max_deflection", [])) > k
-                                           else 0.0 for h in hist], thr))
+                                           else 0.0 for h in hist], ONSET_DEFLECTION * hs[k]))
+    if len(set(hs)) == 1:  # one thickness: the largest deflection of any rod crosses it
+        first = _crossing(strains, [h.get("max_deflection", 0.0) for h in hist],
+                          ONSET_DEFLECTION * hs[0])
+    else:  # lines of different thickness: the first rod to cross its own
+        first = min((v for v in per_rod if v is not None), default=None)
     return {"onset_release_strain": first,
             "onset_negative_curvature_release_strain": unstable,
             "rods_onset_release_strain": json.dumps(per_rod)}

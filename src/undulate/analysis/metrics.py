@@ -51,6 +51,7 @@ __all__ = [
     "coherence",
     "classify",
     "analyse_run",
+    "unrolled",
 ]
 
 FLAT_REL = 1e-3
@@ -257,13 +258,29 @@ def classify(rods_xyz: list[ArrayLike], *, L: float | None = None) -> str:
     return analyse_run(list(rods_xyz), L=L)["family"]
 
 
+def unrolled(xyz: ArrayLike) -> np.ndarray:
+    """``(M, 2)`` array ``(s, z)`` of a curved rod's centre line ``(M, 3)``: ``s`` its in-plane
+    arc length (of the ``(x, y)`` path), so that a line drawn as an arc or a spiral is
+    measured along itself, as a straight rod is along x."""
+    arr = np.asarray(xyz, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"centre line: expected an (M, 3) array to unroll; got shape "
+                         f"{arr.shape}")
+    ds = np.linalg.norm(np.diff(arr[:, :2], axis=0), axis=1)
+    return np.c_[np.concatenate([[0.0], np.cumsum(ds)]), arr[:, 2]]
+
+
 def analyse_run(
-    centerlines: list[ArrayLike], *, L: float | Sequence[float | None] | None = None
+    centerlines: list[ArrayLike], *, L: float | Sequence[float | None] | None = None,
+    along: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Analyse all rods of one run.
 
     ``L``: the nominal (printed) length of every rod, or one per rod, or None (see
-    :func:`rod_metrics`).
+    :func:`rod_metrics`). ``along``: per rod, ``"principal"`` (default: the abscissa is the
+    principal in-plane direction of its points, right for straight lines) or
+    ``"arclength"`` (curved lines: measured along their own in-plane arc length,
+    :func:`unrolled`); coherence then compares neighbours along the same abscissas.
 
     Returns ``{"rods": [rod_metrics(...) + {"index": k}], "coherence": [coherence(rod k,
     rod k+1)], "family": str, "summary": {...}}``; the summary holds mean/std over the
@@ -278,6 +295,15 @@ def analyse_run(
         Ls = list(L)
         if len(Ls) != len(centerlines):
             raise ValueError(f"analyse_run: {len(Ls)} lengths L for {len(centerlines)} rods")
+    if along is not None:
+        if len(along) != len(centerlines):
+            raise ValueError(f"analyse_run: {len(along)} 'along' entries for "
+                             f"{len(centerlines)} rods")
+        bad = sorted(set(along) - {"principal", "arclength"})
+        if bad:
+            raise ValueError(f"analyse_run: along must be 'principal' or 'arclength', got {bad}")
+        centerlines = [unrolled(c) if a == "arclength" else c
+                       for c, a in zip(centerlines, along, strict=True)]
     rods = []
     for k, c in enumerate(centerlines):
         try:

@@ -120,10 +120,10 @@ class Plan:
 
 
 def lines_of_case(case: Any) -> list[PrintLine]:
-    """The case's rods as print lines (printed configuration, origin at the fabric centre)."""
-    r = case.rods
-    return [PrintLine(k, np.array([[x0, y], [x0 + length, y]], dtype=float), r.h, r.b)
-            for k, (x0, y, length) in enumerate(case.segments())]
+    """The case's rods as print lines (printed configuration, origin at the fabric centre):
+    the rods along x, or every line of its pattern with its own h and b."""
+    return [PrintLine(k, p.points.astype(float), p.h, p.b)
+            for k, p in enumerate(case.rod_paths())]
 
 
 def _layers(h: float, st: PrintSettings) -> tuple[int, float]:

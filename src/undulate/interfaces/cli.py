@@ -2,6 +2,7 @@
 
     undulate demo --out DIR          default single rod (L = 100 mm), all outputs
     undulate run CASE.toml --out DIR any case described in TOML (docs/config.md)
+    undulate run --pattern F.svg --out DIR   the lines of a drawing (docs/patterns.md)
     undulate analyse DIR             shape analysis of a run directory (docs/analysis.md)
     undulate theory --h 0.5          analytical model (docs/theory.md)
     undulate design --target l=20    what to print for a wanted wave (docs/design.md)
@@ -113,7 +114,7 @@ def _simulate_and_report(case, out: Path, overwrite: bool) -> None:
         t.add_row(key, f"{v:.4g}" if isinstance(v, float) else str(v))
     console.print(t)
     typer.echo(f"wrote {out}/: final.vtu, printed.vtu, metrics.json, centerlines.npz, "
-               "rod_*_side.png, rod_*_fits.png")
+               "rod_*_side.png, rod_*_fits.png, top_view.png, view_3d.png")
 
 
 _OVERWRITE_HELP = ("replace a previous run in --out (its files only); without it a non-empty "
@@ -141,19 +142,34 @@ def demo(
 
 @app.command()
 def run(
-    config: Path = typer.Argument(..., help="case description (TOML)"),
+    config: Path = typer.Argument(None, help="case description (TOML); optional with --pattern"),
     out: Path = typer.Option(..., "--out", help="output folder"),
+    pattern: Path = typer.Option(
+        None, "--pattern", help="lines to print from an SVG or DXF drawing (docs/patterns.md)"),
+    scale: float = typer.Option(1.0, "--scale", help="multiplies the drawing's coordinates"),
     overwrite: bool = typer.Option(False, "--overwrite", help=_OVERWRITE_HELP),
 ) -> None:
-    """Run the case described in CONFIG (TOML); see docs/config.md for every field."""
-    from ..model import ConfigError, load_case
+    """Run the case described in CONFIG (TOML), or the lines of a drawing (--pattern) with
+    the default settings or those of CONFIG; see docs/config.md and docs/patterns.md."""
+    from ..model import ConfigError, load_case, with_drawing
 
+    label = config if config is not None else pattern
     try:
-        case = load_case(config)
+        if config is None and pattern is None:
+            raise ConfigError("give a case file (TOML), a drawing (--pattern), or both")
+        if pattern is None:
+            case = load_case(config)
+        else:
+            data = {} if config is None else load_case(config).model_dump(
+                mode="json", exclude_unset=True)
+            if config is not None and "pattern" in data:
+                raise ConfigError("has a [pattern] already; give its lines there or in "
+                                  "--pattern, not both")
+            case = with_drawing(data, pattern, scale=scale)
     except ConfigError as err:
         lines = str(err).splitlines() or ["invalid case"]
-        if not lines[0].startswith(str(config)):  # field errors: name the file on each line
-            lines = [f"{config}: {line}" for line in lines]
+        if not lines[0].startswith(str(label)):  # field errors: name the file on each line
+            lines = [f"{label}: {line}" for line in lines]
         for line in lines[:-1]:
             typer.echo(f"Error: {line}", err=True)
         raise _fail(lines[-1]) from None

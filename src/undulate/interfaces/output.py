@@ -245,17 +245,20 @@ def _write_vtu(path: Path, result, x: np.ndarray, cls: list[np.ndarray]) -> None
     )
 
 
-def _plot_side(path: Path, cl: np.ndarray, cl0: np.ndarray, offset: float, k: int,
-               title: str) -> None:
+def _plot_side(path: Path, cl: np.ndarray, cl0: np.ndarray, offset: float, k: int | str,
+               title: str, along_arc: bool = False) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..analysis.metrics import unrolled
+
     fig, ax = plt.subplots(figsize=(8, 2.8))
-    ax.plot(cl[:, 0], cl[:, 2] - offset, "-", lw=2, label="rod centre line (final)")
+    xs = unrolled(cl)[:, 0] if along_arc else cl[:, 0]
+    ax.plot(xs, cl[:, 2] - offset, "-", lw=2, label="rod centre line (final)")
     ax.axhline(0.0, color="0.6", lw=0.8, label="printed level")
-    ax.set_xlabel("x [mm]")
+    ax.set_xlabel("arc length along the line [mm]" if along_arc else "x [mm]")
     ax.set_ylabel("z [mm]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_title(f"rod {k}: {title}", fontsize=9)
@@ -270,13 +273,18 @@ def write_result(result, out: Path, *, extra: dict | None = None, plots: bool = 
     """Write all output files of ``result`` into ``out``; return the metrics dict written."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    off = result.section.offset
+    offs = [sk.offset for sk in result.sections]
     cls = result.centerlines
+    paths = result.case.rod_paths()
     rods = []
-    for k, (c, (x0, y0, length)) in enumerate(zip(cls, result.case.segments(), strict=True)):
-        rods.append(dict(index=k, x_start=x0, y=y0, length=length,
+    for k, (c, pth) in enumerate(zip(cls, paths, strict=True)):
+        chord = pth.points[-1] - pth.points[0]
+        rods.append(dict(index=k, id=pth.id, x_start=float(pth.points[0, 0]),
+                         y=float(pth.points[0, 1]), length=pth.length, h=pth.h, b=pth.b,
+                         angle_deg=float(np.degrees(np.arctan2(chord[1], chord[0]))),
+                         straight=pth.straight,
                          y_printed=float(np.mean(result.centerlines_printed[k][:, 1])),
-                         **rod_summary(c, off)))
+                         **rod_summary(c, offs[k])))
     metrics = {
         "undulate_version": __version__,
         "units": "mm, MPa, N, s",
@@ -298,8 +306,92 @@ def write_result(result, out: Path, *, extra: dict | None = None, plots: bool = 
         _write_vtu(out / "printed.vtu", result, result.x_printed, result.centerlines_printed)
     if plots:
         c = result.case
-        title = f"h = {c.rods.h} mm, eps0 = {c.release.eps0}, seed = {c.imperfection.seed}"
         for k, cl in enumerate(cls):
-            _plot_side(out / f"rod_{k}_side.png", cl, result.centerlines_printed[k], off, k,
-                       title)
+            title = (f"h = {paths[k].h:g} mm, eps0 = {c.release.eps0}, "
+                     f"seed = {c.imperfection.seed}")
+            _plot_side(out / f"rod_{k}_side.png", cl, result.centerlines_printed[k], offs[k],
+                       paths[k].id if c.pattern is not None else k, title,
+                       along_arc=not paths[k].straight)
+        plot_top_view(out / "top_view.png", result)
+        plot_3d(out / "view_3d.png", result)
     return metrics
+
+
+def _height_limits(result) -> tuple[float, float]:
+    z = result.x_final[:, 2]
+    lim = max(float(np.max(np.abs(z))), 1e-6)
+    return -lim, lim
+
+
+def plot_top_view(path: Path, result) -> None:
+    """Top view of the final shape: the fabric coloured by height z [mm] (diverging map,
+    0 = the print bed), each rod's centre line drawn and named at its start."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.tri import Triangulation
+
+    x = result.x_final
+    lo, hi = _height_limits(result)
+    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    tri = Triangulation(x[:, 0], x[:, 1], result.mesh.tris)
+    pc = ax.tripcolor(tri, x[:, 2], shading="gouraud", cmap="RdBu_r", vmin=lo, vmax=hi)
+    paths = result.case.rod_paths()
+    for k, cl in enumerate(result.centerlines):
+        ax.plot(cl[:, 0], cl[:, 1], "-", color="k", lw=1.2)
+        ax.annotate(paths[k].id, cl[0, :2], fontsize=7, xytext=(-4, 3),
+                    textcoords="offset points", ha="right")
+    fig.colorbar(pc, ax=ax, label="height z [mm]", shrink=0.85)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm] (stretch direction)")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(f"{result.case.name}: top view after release (fabric coloured by height)",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_3d(path: Path, result) -> None:
+    """3D rendering of the final shape near the rods (the far fabric cropped), coloured by
+    height, with the rods' centre lines in black. Vertical scale exaggerated where the
+    shape is flat, and said so in the title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = result.x_final
+    cls = np.concatenate(result.centerlines)
+    pad = 0.15 * max(float(np.ptp(cls[:, 0])), float(np.ptp(cls[:, 1])), 1.0)
+    lo_xy, hi_xy = cls[:, :2].min(axis=0) - pad, cls[:, :2].max(axis=0) + pad
+    tris = result.mesh.tris
+    cen = x[tris].mean(axis=1)
+    keep = np.all((cen[:, :2] >= lo_xy) & (cen[:, :2] <= hi_xy), axis=1)
+    lo, hi = _height_limits(result)
+    span = float(np.max(hi_xy - lo_xy))
+    z_range = max(hi - lo, 1e-9)
+    exag = max(1.0, 0.15 * span / z_range)
+    fig = plt.figure(figsize=(8.0, 5.5))
+    ax = fig.add_subplot(projection="3d")
+    ax.plot_trisurf(x[:, 0], x[:, 1], x[:, 2] * exag, triangles=tris[keep], cmap="RdBu_r",
+                    vmin=lo * exag, vmax=hi * exag, linewidth=0.0, antialiased=False,
+                    alpha=0.9)
+    for cl in result.centerlines:
+        ax.plot(cl[:, 0], cl[:, 1], cl[:, 2] * exag, "-", color="k", lw=1.2, zorder=10)
+    ax.set_xlim(lo_xy[0], hi_xy[0])
+    ax.set_ylim(lo_xy[1], hi_xy[1])
+    ax.set_box_aspect((hi_xy[0] - lo_xy[0], hi_xy[1] - lo_xy[1],
+                       max(z_range * exag, 0.05 * span)))
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_zlabel("z [mm]" if exag == 1.0 else f"z x {exag:.3g}")
+    ax.view_init(elev=35, azim=-60)
+    ttl = f"{result.case.name}: final shape"
+    if exag > 1.0:
+        ttl += f" (heights x {exag:.3g})"
+    ax.set_title(ttl, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -130,74 +130,75 @@ def rod_stencils(chain: RodChain) -> np.ndarray:
     return np.stack([pa, pb, p, chain.qp, chain.qm], axis=1)
 
 
-_edge_len_v = CachedJit(jax.vmap(edge_length, in_axes=(0, None)), "build.rod_edge_length")
-_vertex_v = CachedJit(jax.vmap(vertex_strains, in_axes=(0, None)), "build.rod_vertex_strains")
+_edge_len_v = CachedJit(jax.vmap(edge_length), "build.rod_edge_length_d")
+_vertex_v = CachedJit(jax.vmap(vertex_strains), "build.rod_vertex_strains_d")
 _node_v = CachedJit(jax.vmap(node_strains), "build.rod_node_strains")
 
 
+def _per_rod(chains: list[RodChain], sec: RodSection | list[RodSection]) -> list[RodSection]:
+    secs = [sec] * len(chains) if isinstance(sec, RodSection) else list(sec)
+    if len(secs) != len(chains):
+        raise ValueError(f"rod sections: {len(secs)} given for {len(chains)} rods")
+    return secs
+
+
 def rod_groups(
-    chains: list[RodChain], x_printed: np.ndarray, sec: RodSection
+    chains: list[RodChain], x_printed: np.ndarray, sec: RodSection | list[RodSection]
 ) -> list[ElementGroup]:
-    """Stretch, bend/twist and footprint groups of all rods, stress-free at ``x_printed``."""
-    d = sec.offset
-    edges, verts, nodes_ = [], [], []
-    for ch in chains:
-        st = rod_stencils(ch)
-        m = st.shape[0]
-        edges.append(np.concatenate([st[:-1], st[1:]], axis=1))  # (m-1, 10)
-        if m >= 3:
-            verts.append(np.concatenate([st[:-2], st[1:-1], st[2:]], axis=1))  # (m-2, 15)
-        nodes_.append(st)
-    e_idx = np.concatenate(edges)
-    n_idx = np.concatenate(nodes_)
+    """Stretch, bend/twist and footprint groups of all rods, stress-free at ``x_printed``.
+
+    ``sec``: one section for every rod, or one per rod (a pattern's lines may differ in h
+    and b); each element carries its rod's stiffnesses and offset.
+    """
+    secs = _per_rod(chains, sec)
     xj = jnp.asarray(x_printed)
-    L0 = np.asarray(_edge_len_v(xj[e_idx], d))
-    groups = [
-        ElementGroup(
-            "rod_stretch",
-            rod_stretch,
-            e_idx,
-            (np.full(len(L0), d), L0, np.full(len(L0), sec.EA)),
-        )
-    ]
-    if verts:
-        v_idx = np.concatenate(verts)
-        rest = np.asarray(_vertex_v(xj[v_idx], d))
-        # Voronoi length: half of the two adjacent rest edges
-        lv_parts = []
-        for ch in chains:
-            st = rod_stencils(ch)
-            le = np.asarray(_edge_len_v(xj[np.concatenate([st[:-1], st[1:]], axis=1)], d))
-            if le.size >= 2:
-                lv_parts.append(0.5 * (le[:-1] + le[1:]))
-        lv = np.concatenate(lv_parts)
-        nv = v_idx.shape[0]
+
+    def col(secs_: list[RodSection], name: str) -> np.ndarray:
+        return np.array([getattr(q, name) for q in secs_], dtype=float)
+
+    stencils = [rod_stencils(ch) for ch in chains]
+    e_idx = [np.concatenate([st[:-1], st[1:]], axis=1) for st in stencils]  # (m-1, 10) each
+    e_sec = [sk for st, sk in zip(stencils, secs, strict=True) for _ in range(len(st) - 1)]
+    e_all = np.concatenate(e_idx)
+    d_e = col(e_sec, "offset")
+    # one kernel call for all rods (rods of different lengths would each compile their own)
+    L0 = np.asarray(_edge_len_v(xj[e_all], jnp.asarray(d_e)))
+    L0_rod = np.split(L0, np.cumsum([len(e) for e in e_idx])[:-1])
+    v_idx, v_sec, n_idx, n_sec, lv, ln = [], [], [], [], [], []
+    for st, sk, le in zip(stencils, secs, L0_rod, strict=True):
+        m = st.shape[0]
+        if m >= 3:
+            v_idx.append(np.concatenate([st[:-2], st[1:-1], st[2:]], axis=1))  # (m-2, 15)
+            v_sec += [sk] * (m - 2)
+            lv.append(0.5 * (le[:-1] + le[1:]))  # Voronoi length: half the two rest edges
+        n_idx.append(st)
+        n_sec += [sk] * m
+        lnk = np.zeros(m)  # length of rod each node carries (half edges)
+        lnk[:-1] += 0.5 * le
+        lnk[1:] += 0.5 * le
+        ln.append(lnk)
+
+    groups = [ElementGroup("rod_stretch", rod_stretch, e_all, (d_e, L0, col(e_sec, "EA")))]
+    if v_idx:
+        v_all = np.concatenate(v_idx)
+        d_v = col(v_sec, "offset")
+        rest = np.asarray(_vertex_v(xj[v_all], jnp.asarray(d_v)))
         groups.append(
             ElementGroup(
                 "rod_bend_twist",
                 rod_bend_twist,
-                v_idx,
-                (np.full(nv, d), rest, lv, np.full(nv, sec.EI_out), np.full(nv, sec.EI_in),
-                 np.full(nv, sec.GJ)),
+                v_all,
+                (d_v, rest, np.concatenate(lv), col(v_sec, "EI_out"), col(v_sec, "EI_in"),
+                 col(v_sec, "GJ")),
             )
         )
-    rest_n = np.asarray(_node_v(xj[n_idx]))
-    # length of rod each node carries (half edges)
-    ln_parts = []
-    for ch in chains:
-        st = rod_stencils(ch)
-        le = np.asarray(_edge_len_v(xj[np.concatenate([st[:-1], st[1:]], axis=1)], d))
-        ln = np.zeros(st.shape[0])
-        ln[:-1] += 0.5 * le
-        ln[1:] += 0.5 * le
-        ln_parts.append(ln)
-    ln = np.concatenate(ln_parts)
-    G_B = sec.E_B / (2.0 * (1.0 + sec.nu_B))
-    k = np.stack(
-        [sec.E_B * sec.b * sec.h * ln, G_B * sec.b * sec.h * ln, sec.E_B * sec.h * ln / sec.b],
-        axis=1,
-    )
-    groups.append(ElementGroup("rod_footprint", rod_footprint, n_idx, (rest_n, k)))
+    n_all = np.concatenate(n_idx)
+    rest_n = np.asarray(_node_v(xj[n_all]))
+    lnn = np.concatenate(ln)
+    E_B, nu_B, b, h = (col(n_sec, k) for k in ("E_B", "nu_B", "b", "h"))
+    G_B = E_B / (2.0 * (1.0 + nu_B))
+    k = np.stack([E_B * b * h * lnn, G_B * b * h * lnn, E_B * h * lnn / b], axis=1)
+    groups.append(ElementGroup("rod_footprint", rod_footprint, n_all, (rest_n, k)))
     return groups
 
 
@@ -210,15 +211,17 @@ def _centre_point(x5: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
 _centre_v = CachedJit(jax.vmap(_centre_point, in_axes=(0, None)), "build.rod_centre")
 
 
-def rod_centrelines(chains: list[RodChain], x: np.ndarray, sec: RodSection) -> list[np.ndarray]:
-    """Rod centre lines (m, 3) at node positions ``x`` (offset along the fabric normal).
+def rod_centrelines(chains: list[RodChain], x: np.ndarray,
+                    sec: RodSection | list[RodSection]) -> list[np.ndarray]:
+    """Rod centre lines (m, 3) at node positions ``x`` (offset along the fabric normal; one
+    section for all rods or one per rod).
 
     One jitted kernel for every call (the offset is an argument, not a constant baked into a
     new function), so the release loop, which calls this at every step, never retraces.
     """
     xj = jnp.asarray(x)
-    d = jnp.asarray(sec.offset, dtype=jnp.float64)
-    return [np.asarray(_centre_v(xj[rod_stencils(ch)], d)) for ch in chains]
+    return [np.asarray(_centre_v(xj[rod_stencils(ch)], jnp.asarray(sk.offset, jnp.float64)))
+            for ch, sk in zip(chains, _per_rod(chains, sec), strict=True)]
 
 
 def free_rod(n_nodes: int, length: float, b: float) -> tuple[RodChain, np.ndarray]:

@@ -18,19 +18,23 @@ from .grid import (
 from .unstructured import (
     UNSTRUCTURED_HINGE_FACTOR,
     RodLine,
+    RodPath,
     build_unstructured_mesh,
     rod_lines_from_segments,
+    stretch_rotation,
 )
 
 __all__ = [
     "FabricMesh",
     "RodChain",
     "RodLine",
+    "RodPath",
     "build_mesh",
     "build_structured_mesh",
     "build_unstructured_mesh",
     "graded_coordinates",
     "rod_lines_from_segments",
+    "stretch_rotation",
     "STRUCTURED_HINGE_FACTOR",
     "UNSTRUCTURED_HINGE_FACTOR",
 ]
@@ -49,6 +53,7 @@ def build_mesh(
     grading: float,
     kind: Literal["unstructured", "structured"] = "structured",
     h_far: float | None = None,
+    direction: float = 0.0,
 ) -> FabricMesh:
     """Mesh of the fabric for rods given in printed coordinates, of the requested ``kind``.
 
@@ -60,12 +65,20 @@ def build_mesh(
     if kind == "unstructured":
         return build_unstructured_mesh(
             segments, b, extent, eps0=eps0, lam_y=lam_y, dx_rod=dx_rod,
-            h_far=dx_far if h_far is None else h_far, grading=grading,
+            h_far=dx_far if h_far is None else h_far, grading=grading, direction=direction,
         )
+    if direction != 0.0:
+        raise ValueError("mesh: the structured mesh stretches along x only (direction 0); use "
+                         "kind = 'unstructured'")
     if kind != "structured":
         raise ValueError(f"mesh kind: must be 'unstructured' or 'structured', got {kind!r}")
     segs = []
     for k, ln in enumerate(rod_lines_from_segments(segments)):
+        if isinstance(ln, RodPath):
+            raise ValueError(
+                f"mesh: rod {ln.id or k} is a polyline; the structured mesh takes straight rods "
+                "along +x only (use kind = 'unstructured')"
+            )
         if abs(ln.direction[1]) > 1e-12 or ln.direction[0] < 0:
             raise ValueError(
                 f"mesh: rod {k} has direction {ln.direction}; the structured mesh takes rods "

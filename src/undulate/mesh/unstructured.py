@@ -24,7 +24,11 @@ lengths along x. It is imposed with Triangle's per-triangle area constraints (ta
 equilateral triangle of side h at each centroid, a few refinement passes) under a minimum angle
 ``min_angle``. Nodes on the outer edges are placed from the same size function.
 
-Geometry code is direction-agnostic: rods may point in any in-plane direction.
+Geometry code is direction-agnostic: rods may point in any in-plane direction, and a rod may
+be any smooth polyline (:class:`RodPath`): its centre nodes are then equally spaced along its
+arc length and the side rows lie at +-b/2 along the local normal (central differences of the
+centre nodes), so a curved rod's footprint is a curved strip; each path may carry its own
+width b.
 """
 
 from __future__ import annotations
@@ -37,7 +41,9 @@ import numpy as np
 from .grid import FabricMesh, RodChain
 
 __all__ = [
+    "stretch_rotation",
     "RodLine",
+    "RodPath",
     "rod_lines_from_segments",
     "build_unstructured_mesh",
     "UNSTRUCTURED_HINGE_FACTOR",
@@ -85,16 +91,100 @@ class RodLine:
         return np.asarray(self.start) + s[:, None] * np.asarray(self.direction)
 
 
-def rod_lines_from_segments(segments) -> list[RodLine]:
-    """Accept RodLine objects or (x_start, y_centre, length) tuples of rods along +x."""
-    out = []
+@dataclass(frozen=True)
+class RodPath:
+    """A rod along a polyline ``points`` (k x 2, printed configuration, mm), of its own width
+    ``b`` [mm] (None: the mesh's common width). Straight or curved; it must bend gently
+    compared with b and the node spacing (checked by the case, see ``model/config.py``)."""
+
+    points: np.ndarray
+    b: float | None = None
+    id: str = ""
+
+    def __post_init__(self) -> None:
+        pts = np.asarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.isfinite(pts).all():
+            raise ValueError(f"RodPath: points must be k >= 2 finite (x, y) pairs, got shape "
+                             f"{pts.shape}")
+        keep = np.ones(len(pts), bool)
+        keep[1:] = np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-12
+        pts = pts[keep]
+        if len(pts) < 2:
+            raise ValueError("RodPath: has zero length")
+        object.__setattr__(self, "points", pts)
+
+    @property
+    def length(self) -> float:
+        """Arc length [mm]."""
+        return float(np.sum(np.linalg.norm(np.diff(self.points, axis=0), axis=1)))
+
+    def stations(self, dx_rod: float) -> np.ndarray:
+        """(m, 2) centre nodes equally spaced along the arc length, m = ceil(L / dx_rod) + 1;
+        for a straight path the same as :meth:`RodLine.stations`."""
+        seg = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        n_int = max(1, int(np.ceil(cum[-1] / dx_rod - 1e-9)))
+        s = np.linspace(0.0, cum[-1], n_int + 1)
+        out = np.stack([np.interp(s, cum, self.points[:, 0]),
+                        np.interp(s, cum, self.points[:, 1])], axis=1)
+        out[0], out[-1] = self.points[0], self.points[-1]
+        return out
+
+    @staticmethod
+    def normals(P: np.ndarray) -> np.ndarray:
+        """(m, 2) unit in-plane normals (tangent turned by +90 degrees) at the centre nodes
+        ``P``: central differences inside, one-sided at the ends."""
+        t = np.empty_like(P)
+        t[1:-1] = P[2:] - P[:-2]
+        t[0] = P[1] - P[0]
+        t[-1] = P[-1] - P[-2]
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        return np.stack([-t[:, 1], t[:, 0]], axis=1)
+
+
+def rod_lines_from_segments(segments) -> list[RodLine | RodPath]:
+    """Accept RodLine or RodPath objects or (x_start, y_centre, length) tuples of rods along
+    +x."""
+    out: list[RodLine | RodPath] = []
     for s in segments:
-        if isinstance(s, RodLine):
+        if isinstance(s, RodLine | RodPath):
             out.append(s)
         else:
             x0, y0, length = s
             out.append(RodLine((x0, y0), (1.0, 0.0), length))
     return out
+
+
+def _strip(ln: RodLine | RodPath, dx_rod: float, b: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre nodes P and side rows Qp (+b/2 along the normal), Qm (printed), each (m, 2)."""
+    if isinstance(ln, RodLine):
+        P = ln.stations(dx_rod)
+        nrm = np.broadcast_to(ln.normal, P.shape)
+    else:
+        P = ln.stations(dx_rod)
+        nrm = RodPath.normals(P)
+    half = 0.5 * (ln.b if isinstance(ln, RodPath) and ln.b is not None else b)
+    return P, P + half * nrm, P - half * nrm
+
+
+def _centre_gap(a: np.ndarray, c: np.ndarray, spacing: float) -> tuple[float, np.ndarray]:
+    """Smallest distance between two polylines (each (k, 2)), sampled at most ``spacing``
+    apart, and the point of ``a`` where it is attained."""
+    from scipy.spatial import cKDTree
+
+    def dense(pts: np.ndarray) -> np.ndarray:
+        out = [pts[:1]]
+        for p0, p1 in zip(pts[:-1], pts[1:], strict=True):
+            k = max(1, int(np.ceil(np.linalg.norm(p1 - p0) / spacing)))
+            t = np.linspace(0.0, 1.0, k + 1)[1:, None]
+            out.append(p0 + t * (p1 - p0))
+        return np.concatenate(out)
+
+    da, dc = dense(a), dense(c)
+    d, _ = cKDTree(dc).query(da)
+    k = int(np.argmin(d))
+    return float(d[k]), da[k]
 
 
 BOUNDARY_SPACING = 0.8
@@ -142,7 +232,11 @@ def _rects_overlap(ca: np.ndarray, cb: np.ndarray, tol: float) -> bool:
     return True
 
 
-def _describe(k: int, line: RodLine) -> str:
+def _describe(k: int, line: RodLine | RodPath) -> str:
+    if isinstance(line, RodPath):
+        p0 = line.points[0]
+        name = f"rod {line.id}" if line.id else f"rod {k}"
+        return f"{name} (from {p0[0]:g}, {p0[1]:g}; length {line.length:.4g})"
     return (f"rod {k} (start {line.start[0]:g}, {line.start[1]:g}; direction "
             f"{line.direction[0]:.4g}, {line.direction[1]:.4g}; length {line.length:g})")
 
@@ -160,12 +254,15 @@ def build_unstructured_mesh(
     min_angle: float = 28.0,
     max_passes: int = 12,
     protect_boundary: bool = False,
+    direction: float = 0.0,
 ) -> FabricMesh:
     """Reference mesh for rods (``RodLine`` or (x0, y, L) tuples) given in printed coordinates.
 
-    ``extent`` is the printed fabric box (xmin, xmax, ymin, ymax). Returns a :class:`FabricMesh`
-    with ``xs = ys = None``, the rods' node chains, the clamped edges ``left``/``right`` and the
-    ``node_sets`` "left", "right", "bottom", "top".
+    ``extent`` is the printed fabric box (xmin, xmax, ymin, ymax) in the stretch frame (x along
+    the stretch); ``direction`` [degrees] turns that frame against the drawing's, in which the
+    rods are given and the mesh is made (0: the same frame). Returns a :class:`FabricMesh`
+    with ``xs = ys = None``, the rods' node chains, the clamped edges ``left``/``right`` (the
+    box's ends along the stretch) and the ``node_sets`` "left", "right", "bottom", "top".
     """
     import triangle
     from scipy.spatial import cKDTree
@@ -175,32 +272,48 @@ def build_unstructured_mesh(
         raise ValueError("mesh: the unstructured mesh needs at least one rod")
     sx, sy = 1.0 + eps0, lam_y
     scale = np.array([1.0 / sx, 1.0 / sy])
+    # the stretch runs along (cos, sin)(direction): ``extent`` is the fabric box in the
+    # stretch frame (u along the stretch, v across); rods and the mesh are in the drawing frame
+    rot = stretch_rotation(direction)
+
+    def to_ref(pts: np.ndarray) -> np.ndarray:  # printed (drawing) -> reference (drawing)
+        return ((pts @ rot) * scale) @ rot.T
+
     xmin, xmax, ymin, ymax = (extent[0] / sx, extent[1] / sx, extent[2] / sy, extent[3] / sy)
     tol = 1e-9 * max(xmax - xmin, ymax - ymin)
 
     # ---- rod strips (printed -> reference) and input checks
     strips = []  # (P, Qp, Qm) reference, each (m, 2)
-    corners = []  # printed footprint rectangles
+    corners = []  # printed footprint rectangles (straight rods) or None
+    widths = []
     for k, ln in enumerate(lines):
-        P = ln.stations(dx_rod)
-        nrm = ln.normal * (b / 2.0)
-        Qp, Qm = P + nrm, P - nrm
-        rect = np.array([Qm[0], Qm[-1], Qp[-1], Qp[0]])
-        corners.append(rect)
-        ref = rect * scale
+        P, Qp, Qm = _strip(ln, dx_rod, b)
+        bk = float(np.linalg.norm(Qp[0] - Qm[0]))
+        widths.append(bk)
+        corners.append(np.array([Qm[0], Qm[-1], Qp[-1], Qp[0]])
+                       if isinstance(ln, RodLine) else None)
+        ref = to_ref(np.concatenate([Qp, Qm])) @ rot
         if (ref[:, 0].min() <= xmin + tol or ref[:, 0].max() >= xmax - tol
                 or ref[:, 1].min() <= ymin + tol or ref[:, 1].max() >= ymax - tol):
             raise ValueError(
-                f"mesh: {_describe(k, ln)}: its footprint (width b = {b:g} mm) is not strictly "
+                f"mesh: {_describe(k, ln)}: its footprint (width b = {bk:g} mm) is not strictly "
                 f"inside the fabric {tuple(float(v) for v in extent)} (printed, mm)"
             )
-        strips.append((P * scale, Qp * scale, Qm * scale))
+        strips.append((to_ref(P), to_ref(Qp), to_ref(Qm)))
     for i in range(len(lines)):
         for j in range(i + 1, len(lines)):
-            if _rects_overlap(corners[i], corners[j], 1e-6 * max(b, dx_rod)):
+            tol_ij = 1e-6 * max(widths[i], widths[j], dx_rod)
+            if corners[i] is not None and corners[j] is not None:
+                hit = _rects_overlap(corners[i], corners[j], tol_ij)
+            else:
+                # rods along polylines: centre lines must stay (b_i + b_j) / 2 apart
+                d, _ = _centre_gap(_strip(lines[i], dx_rod, b)[0], _strip(lines[j], dx_rod, b)[0],
+                                   0.1 * min(widths[i], widths[j]))
+                hit = d < 0.5 * (widths[i] + widths[j]) + tol_ij
+            if hit:
                 raise ValueError(
                     f"mesh: {_describe(i, lines[i])} and {_describe(j, lines[j])} overlap or "
-                    f"touch (footprints of width b = {b:g} mm)"
+                    f"touch (footprints of width {widths[i]:g} and {widths[j]:g} mm)"
                 )
 
     # ---- size function (reference lengths)
@@ -240,7 +353,8 @@ def build_unstructured_mesh(
         outline_ids.append((qm_ids, p_start, p_end, qp_ids))
         holes.append((P[0] + P[1] + Qp[0]) / 3.0)
         off += ring.shape[0]
-    box = [np.array(c, float) for c in ((xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax))]
+    box = [np.array(c, float) @ rot.T
+           for c in ((xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax))]
     ring = np.concatenate([_edge_points(box[i], box[(i + 1) % 4], size_at)[:-1]
                            for i in range(4)])
     ids = off + np.arange(ring.shape[0])
@@ -277,6 +391,7 @@ def build_unstructured_mesh(
         return build_unstructured_mesh(
             segments, b, extent, eps0=eps0, lam_y=lam_y, dx_rod=dx_rod, h_far=h_far,
             grading=grading, min_angle=min_angle, max_passes=max_passes, protect_boundary=True,
+            direction=direction,
         )
 
     # ---- strips: interior centre nodes appended, structured triangles added
@@ -308,16 +423,29 @@ def build_unstructured_mesh(
     Ta[flip] = Ta[flip][:, [0, 2, 1]]
 
     eps = 1e-9 * max(xmax - xmin, ymax - ymin)
+    U = Xa @ rot  # stretch frame: the clamped edges are u = xmin and u = xmax
     node_sets = {
-        "left": _sorted_set(Xa, np.abs(Xa[:, 0] - xmin) <= eps, 1),
-        "right": _sorted_set(Xa, np.abs(Xa[:, 0] - xmax) <= eps, 1),
-        "bottom": _sorted_set(Xa, np.abs(Xa[:, 1] - ymin) <= eps, 0),
-        "top": _sorted_set(Xa, np.abs(Xa[:, 1] - ymax) <= eps, 0),
+        "left": _sorted_set(U, np.abs(U[:, 0] - xmin) <= eps, 1),
+        "right": _sorted_set(U, np.abs(U[:, 0] - xmax) <= eps, 1),
+        "bottom": _sorted_set(U, np.abs(U[:, 1] - ymin) <= eps, 0),
+        "top": _sorted_set(U, np.abs(U[:, 1] - ymax) <= eps, 0),
     }
     return FabricMesh(
         X=Xa, tris=Ta, rods=rods, left=node_sets["left"], right=node_sets["right"],
         node_sets=node_sets, hinge_factor=UNSTRUCTURED_HINGE_FACTOR, kind="unstructured",
     )
+
+
+def stretch_rotation(direction: float) -> np.ndarray:
+    """Rotation (2 x 2) from the stretch frame (u along the stretch, v across) to the
+    drawing frame, for a stretch ``direction`` in degrees from the drawing's x axis
+    (counter-clockwise). Row vectors: ``x = u @ R.T``, ``u = x @ R``; the identity, exactly,
+    for 0."""
+    if direction == 0.0:
+        return np.eye(2)
+    t = math.radians(direction)
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, -s], [s, c]])
 
 
 def _has_edges(T: np.ndarray, edges: np.ndarray) -> bool:

@@ -19,15 +19,29 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, ValidationError, model_validator
+import numpy as np
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    StrictFloat,
+    ValidationError,
+    model_validator,
+)
 
 __all__ = [
     "Fabric",
     "Rods",
     "Segment",
+    "Arc",
+    "PatternLine",
+    "Pattern",
+    "PrintedRod",
     "Release",
     "Imperfection",
     "MeshOptions",
@@ -141,10 +155,109 @@ class Rods(_Strict):
         return self
 
 
+class Arc(_Strict):
+    """A circular arc: centre, radius, start and end angles in degrees from +x.
+
+    Angles run counter-clockwise; ``end < start`` draws the arc clockwise."""
+
+    centre: tuple[StrictFloat, StrictFloat] = Field(strict=False, description="(x, y) [mm]")
+    radius: float = Field(gt=0.0, le=1e4, description="radius [mm]")
+    start: float = Field(ge=-720.0, le=720.0, description="start angle [degrees]")
+    end: float = Field(ge=-720.0, le=720.0, description="end angle [degrees]")
+
+    @model_validator(mode="after")
+    def _span(self) -> Arc:
+        if not 0.0 < abs(self.end - self.start) < 360.0:
+            raise ValueError("end: must differ from start by more than 0 and less than 360 "
+                             f"degrees (a line, not a closed circle); got {self.start} -> "
+                             f"{self.end}")
+        return self
+
+    def points(self, resolution: float) -> np.ndarray:
+        """(k, 2) points along the arc, at most ``resolution`` mm apart."""
+        span = math.radians(self.end - self.start)
+        k = max(2, int(math.ceil(abs(span) * self.radius / resolution)) + 1)
+        th = math.radians(self.start) + np.linspace(0.0, span, k)
+        return np.c_[self.centre[0] + self.radius * np.cos(th),
+                     self.centre[1] + self.radius * np.sin(th)]
+
+
+class PatternLine(_Strict):
+    """One line of a pattern: a polyline `points` or an `arc`, optionally its own `h`, `b`.
+
+    Lines without their own ``h`` or ``b`` take those of [rods]."""
+
+    id: str | None = Field(None, min_length=1, max_length=100,
+                           description="name of the line (default: its index)")
+    points: list[Annotated[tuple[StrictFloat, StrictFloat], Strict(False)]] | None = Field(
+        None, description="polyline [[x, y], ...] in the printed frame [mm]"
+    )
+    arc: Arc | None = Field(None, description="a circular arc instead of points")
+    h: float | None = Field(None, gt=0.0, le=20.0, description="thickness of this line [mm]")
+    b: float | None = Field(None, gt=0.0, le=50.0, description="width of this line [mm]")
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> PatternLine:
+        if (self.points is None) == (self.arc is None):
+            raise ValueError("give exactly one of points (a polyline) or arc")
+        if self.points is not None and len(self.points) < 2:
+            raise ValueError("points: a line needs at least two [x, y] points")
+        return self
+
+
+class Pattern(_Strict):
+    """Lines of any direction and shape drawn on the stretched fabric (docs/patterns.md).
+
+    In a case file, ``file = "lines.svg"`` (SVG or DXF, relative to the case file) adds the
+    lines of a drawing, ``scale`` multiplies its coordinates."""
+
+    lines: list[PatternLine] = Field(
+        default_factory=list, description="the lines (at least one, with those of a file)"
+    )
+    resolution: float = Field(
+        0.5, gt=0.0, le=10.0, description="largest spacing of the points sampled on arcs [mm]"
+    )
+    min_gap: float = Field(
+        0.0, ge=0.0, le=1e3,
+        description="smallest allowed gap between two lines, edge to edge [mm] (what your "
+        "printer can separate; 0: the footprints must just not touch)",
+    )
+
+
+@dataclass(frozen=True)
+class PrintedRod:
+    """One rod as printed: ``points`` (k x 2 polyline, printed frame, mm), its ``id``,
+    thickness ``h`` and width ``b`` [mm]."""
+
+    id: str
+    points: np.ndarray
+    h: float
+    b: float
+
+    @property
+    def length(self) -> float:
+        """Arc length [mm]."""
+        return float(np.sum(np.linalg.norm(np.diff(self.points, axis=0), axis=1)))
+
+    @property
+    def straight(self) -> bool:
+        """Whether every point lies on the chord (within 1e-9 of the length)."""
+        c = self.points[-1] - self.points[0]
+        rel = self.points - self.points[0]
+        norm = float(np.hypot(*c))
+        dev = np.abs(rel[:, 0] * c[1] - rel[:, 1] * c[0]) / max(norm, 1e-300)
+        return bool(np.max(dev) <= 1e-9 * max(self.length, 1.0))
+
+
 class Release(_Strict):
     """Pre-stretch and the gradual release of the clamps."""
 
     eps0: float = Field(0.5, gt=0.0, le=3.0, description="pre-stretch engineering strain [-]")
+    direction: float = Field(
+        0.0, ge=-180.0, le=180.0,
+        description="direction of the stretch, degrees from the drawing's x axis "
+        "(counter-clockwise); the clamps hold the fabric's two edges across it",
+    )
     steps: int = Field(40, ge=1, le=100000, description="number of release increments")
     adaptive: bool = Field(True, description="cut the increment when a step fails to converge")
     min_step_fraction: float = Field(
@@ -278,9 +391,20 @@ class Case(_Strict):
         "damped dynamics ([dynamics])",
     )
     dynamics: Dynamics = Field(default_factory=Dynamics)
+    pattern: Pattern | None = Field(
+        None, description="lines of any direction and shape instead of [rods] N, s, L, "
+        "segments (which must then be left out)"
+    )
 
     @model_validator(mode="after")
     def _geometry(self) -> Case:
+        if self.mesh.kind == "structured" and (self.pattern is not None
+                                               or self.release.direction != 0.0):
+            raise ValueError(
+                "mesh.kind: 'structured' takes rods along x stretched along x only; a pattern "
+                "or a release.direction other than 0 needs kind = 'unstructured'")
+        if self.pattern is not None:
+            return self._check_pattern()
         segs = self.segments()
         b = self.rods.b
         if self.mesh.dx_rod > 0.5 * min(s[2] for s in segs):
@@ -301,9 +425,67 @@ class Case(_Strict):
                     )
         return self
 
+    def _check_pattern(self) -> Case:
+        from .pattern import PatternError, check_lines, line_from_points
+
+        r = self.rods
+        given = [k for k in ("N", "s", "L", "segments") if k in r.model_fields_set]
+        if given:
+            raise ValueError(
+                f"pattern: rods.{', rods.'.join(given)} cannot be given together with a "
+                "pattern (its lines have their own geometry; [rods] sets h, b and the material)"
+            )
+        if not self.pattern.lines:
+            raise ValueError("pattern: holds no lines")
+        rods = self.rod_paths()
+        dx = self.mesh.dx_rod
+        try:
+            lines = [line_from_points(p.points, k, id=p.id, h=p.h, b=p.b)
+                     for k, p in enumerate(rods)]
+            check_lines(lines, b=r.b, min_gap=self.pattern.min_gap)
+        except PatternError as err:
+            raise ValueError(f"pattern: {err}") from None
+        from ..mesh import RodPath
+
+        for p in rods:
+            if dx > 0.5 * p.length:
+                raise ValueError(f"pattern: line {p.id}: {p.length:.4g} mm long, shorter than "
+                                 f"2 x mesh.dx_rod = {2 * dx:g} mm (make it longer or lower "
+                                 "mesh.dx_rod)")
+            need = max(p.b, 3.0 * dx)
+            st = RodPath(p.points).stations(dx)
+            if len(st) >= 3:
+                from .pattern import _min_radius
+
+                rad = _min_radius(st)
+                if rad < need:
+                    raise ValueError(
+                        f"pattern: line {p.id}: bends with a radius of {rad:.3g} mm, below the "
+                        f"smallest its rod can follow, max(b, 3 x mesh.dx_rod) = {need:g} mm "
+                        "(draw a wider bend, a narrower line or lower mesh.dx_rod)")
+        return self
+
     # ---- derived geometry -------------------------------------------------------------
+    def rod_paths(self) -> list[PrintedRod]:
+        """Every rod as printed (polyline, id, h, b): the pattern's lines in their order, or
+        the rods of [rods] (parallel or segments) sorted by y as :meth:`segments`."""
+        r = self.rods
+        if self.pattern is None:
+            return [PrintedRod(str(k), np.array([[x0, y], [x0 + length, y]], dtype=float),
+                               r.h, r.b) for k, (x0, y, length) in enumerate(self.segments())]
+        out = []
+        for k, ln in enumerate(self.pattern.lines):
+            pts = (np.asarray(ln.points, dtype=float) if ln.points is not None
+                   else ln.arc.points(self.pattern.resolution))
+            out.append(PrintedRod(ln.id or str(k), pts, ln.h if ln.h is not None else r.h,
+                                  ln.b if ln.b is not None else r.b))
+        return out
+
     def segments(self) -> list[tuple[float, float, float]]:
-        """Rods as (x_start, y_centre, length) in the printed configuration, sorted by y."""
+        """Rods as (x_start, y_centre, length) in the printed configuration, sorted by y (rods
+        along +x; a case with a pattern has no segments: use :meth:`rod_paths`)."""
+        if self.pattern is not None:
+            raise ValueError("case: a pattern's lines are not segments along x; use rod_paths()")
         r = self.rods
         if r.segments is not None:
             out = [(s.start[0], s.start[1], s.length) for s in r.segments]
@@ -314,13 +496,24 @@ class Case(_Strict):
         return sorted(out, key=lambda s: (s[1], s[0]))
 
     def fabric_extent(self) -> tuple[float, float, float, float]:
-        """(xmin, xmax, ymin, ymax) of the fabric in the printed (stretched) configuration."""
-        segs = self.segments()
-        b = self.rods.b
-        xmin = min(s[0] for s in segs) - self.fabric.margin_x
-        xmax = max(s[0] + s[2] for s in segs) + self.fabric.margin_x
-        ymin = min(s[1] for s in segs) - b / 2 - self.fabric.margin_y
-        ymax = max(s[1] for s in segs) + b / 2 + self.fabric.margin_y
+        """(xmin, xmax, ymin, ymax) of the fabric in the printed (stretched) configuration, in
+        the stretch frame (x along the stretch; the drawing's frame for direction 0): the rods'
+        footprints plus ``margin_x`` beyond them along the stretch and ``margin_y`` across."""
+        from ..mesh import stretch_rotation
+
+        rot = stretch_rotation(self.release.direction)
+        pts = [p.points @ rot for p in self.rod_paths()]  # in the stretch frame
+        bs = [p.b for p in self.rod_paths()]
+        lo = np.min([q.min(axis=0) - b / 2 for q, b in zip(pts, bs, strict=True)], axis=0)
+        hi = np.max([q.max(axis=0) + b / 2 for q, b in zip(pts, bs, strict=True)], axis=0)
+        if self.pattern is None and self.release.direction == 0.0:
+            # rods along the stretch end exactly at their ends
+            lo[0] = min(float(q[0, 0]) for q in pts)
+            hi[0] = max(float(q[-1, 0]) for q in pts)
+        xmin = float(lo[0]) - self.fabric.margin_x
+        xmax = float(hi[0]) + self.fabric.margin_x
+        ymin = float(lo[1]) - self.fabric.margin_y
+        ymax = float(hi[1]) + self.fabric.margin_y
         # symmetric about the origin in x so the clamps move symmetrically
         half = max(abs(xmin), abs(xmax))
         return -half, half, ymin, ymax
@@ -337,6 +530,13 @@ RULES: tuple[str, ...] = (
     "`mesh.dx_rod` <= half the shortest rod (`rods.L`, or the shortest segment `length`).",
     "Rods must not overlap or touch: their footprints are `rods.b` wide, so two rods that "
     "overlap in x need `|y_i - y_j| >= b`.",
+    "`[pattern]`: at least one line; `rods.N`, `rods.s`, `rods.L` and `rods.segments` must "
+    "then be left out, and `mesh.kind` must be `\"unstructured\"` (also for "
+    "`release.direction` other than 0). In a case file, `pattern.file` adds the lines of an SVG "
+    "or DXF drawing (path relative to the case file; centred on the origin) and "
+    "`pattern.scale` multiplies its coordinates. Lines must not cross or touch (footprints "
+    "`b` wide), keep `pattern.min_gap` apart, be at least `2 mesh.dx_rod` long and bend no "
+    "tighter than a radius of `max(b, 3 mesh.dx_rod)`.",
     "A case file must hold at least one setting: an empty file is refused (`undulate demo` "
     "runs the default case; a file with only `name = \"...\"` runs the defaults).",
 )
@@ -445,7 +645,47 @@ def load_case(path: str | Path) -> Case:
             f"{p}: empty case (no settings); write at least one setting, e.g. name = "
             '"my-case", to run the defaults, or use `undulate demo`'
         )
+    pat = data.get("pattern")
+    if isinstance(pat, dict) and "file" in pat:
+        pat = dict(pat)
+        drawing, scale = pat.pop("file"), pat.pop("scale", 1.0)
+        if not isinstance(drawing, str) or not drawing:
+            raise ConfigError(f"pattern.file: must be the path of an SVG or DXF drawing (got "
+                              f"{drawing!r})")
+        data = {**data, "pattern": pat}
+        return with_drawing(data, p.parent / drawing, scale=scale)
+    if isinstance(pat, dict) and "scale" in pat:
+        raise ConfigError("pattern.scale: only with pattern.file (it scales a drawing)")
     return case_from_dict(data)
+
+
+def with_drawing(data: dict, drawing: str | Path, *, scale: object = 1.0) -> Case:
+    """The case ``data`` (a dict, as read from TOML) with the lines of an SVG or DXF
+    ``drawing`` added to its pattern (after any lines it lists); ``scale`` multiplies the
+    drawing's coordinates. Raises :class:`ConfigError` naming the file or the line."""
+    from .pattern import PatternError, read_pattern
+
+    problem = number_problem("pattern.scale", scale)
+    if problem:
+        raise ConfigError(problem)
+    pat = dict(data.get("pattern") or {})
+    res = pat.get("resolution", _default(Pattern, "resolution"))
+    if number_problem("pattern.resolution", res) is not None:
+        res = _default(Pattern, "resolution")  # reported by the validation below
+    try:
+        drawn = read_pattern(drawing, scale=float(scale), resolution=float(res))
+    except PatternError as err:
+        raise ConfigError(f"{Path(drawing).name}: {err}") from None
+    lines = list(pat.get("lines") or [])
+    for ln in drawn:
+        item: dict[str, Any] = {"id": ln.id, "points": ln.points.tolist()}
+        if ln.h is not None:
+            item["h"] = ln.h
+        if ln.b is not None:
+            item["b"] = ln.b
+        lines.append(item)
+    pat["lines"] = lines
+    return case_from_dict({**data, "pattern": pat})
 
 
 _BOUND_SYMBOLS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}

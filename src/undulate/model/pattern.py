@@ -153,6 +153,11 @@ def read_svg(text: str | bytes, *, scale: float = 1.0, resolution: float = 0.5,
     lines: list[Line] = []
     count = 0
     for el in doc.elements():
+        if isinstance(el, S.Text | S.Image):  # drawn, but not as lines: never dropped silently
+            kind = "text" if isinstance(el, S.Text) else "image"
+            what = f" {el.id!r}" if getattr(el, "id", None) else ""
+            raise PatternError(f"svg: a {kind} element{what} is not a line (only path, line and "
+                               f"polyline are); remove it, or convert it to paths")
         if not isinstance(el, S.Shape):
             continue
         tag = type(el).__name__.replace("Simple", "").lower()

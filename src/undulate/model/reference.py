@@ -66,6 +66,8 @@ def _type_name(ann: Any) -> str:
         if isinstance(item, type) and issubclass(item, BaseModel):
             return "array of tables"
         return f"array of {_type_name(item)}"
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return "table"
     return {float: "number", int: "integer", bool: "true / false", str: "text"}.get(
         ann, getattr(ann, "__name__", str(ann))
     )
@@ -118,7 +120,9 @@ def _allowed(model: type[BaseModel], name: str, f: FieldInfo) -> str:
             hi = getattr(m, "max_length", hi)
         if lo is not None or hi is not None:
             return f"{lo or 0} to {hi} characters"
-    return "see below" if typing.get_origin(ann) is list else "any"
+    nested = typing.get_origin(ann) is list or (isinstance(ann, type)
+                                                 and issubclass(ann, BaseModel))
+    return "see below" if nested else "any"
 
 
 def _table(model: type[BaseModel], title: str, out: list[str], nested: list) -> None:
@@ -130,7 +134,7 @@ def _table(model: type[BaseModel], title: str, out: list[str], nested: list) -> 
     for name, f in model.model_fields.items():
         ann = _strip_optional(f.annotation)
         if isinstance(ann, type) and issubclass(ann, BaseModel):
-            continue  # its own section
+            nested.append((ann, f"[{title.strip('[]')}.{name}]"))  # its own section
         out.append(
             f"| `{name}` | {_type_name(f.annotation)} | {_default(f)} | "
             f"{_allowed(model, name, f)} | {f.description or ''} |"
@@ -160,8 +164,8 @@ def config_markdown() -> str:
     for model, title in sections:
         nested: list = []
         _table(model, title, out, nested)
-        for sub, subtitle in nested:
-            _table(sub, subtitle, out, [])
+        for sub, subtitle in nested:  # grows while it is read: tables inside tables
+            _table(sub, subtitle, out, nested)
     out += ["## Rules between fields", ""]
     out += [f"* {r}" for r in config.RULES]
     out.append("")

@@ -2,8 +2,9 @@
 
 1. **Pre-stretch.** The fabric (reference = unstretched mesh) is stretched along x by clamping
    its short edges at x = X (1 + eps0) (y and z held at their reference values, as in a frame);
-   the long edges are free. The in-plane equilibrium is solved with z = 0 (the fabric is flat
-   on the print bed).
+   the long edges are free. With ``release.direction`` the same happens in a frame turned by
+   that angle against the drawing's (x along the stretch). The in-plane equilibrium is
+   solved with z = 0 (the fabric is flat on the print bed).
 2. **Print.** Rod element groups are built from the pre-stretched positions, so the rods are
    stress-free there.
 3. **Imperfection.** A smooth random out-of-plane displacement (RMS ``amplitude``, correlation
@@ -35,7 +36,7 @@ from ..mechanics.build import (
     rod_centrelines,
     rod_groups,
 )
-from ..mesh import FabricMesh, build_mesh
+from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
 from .linear import make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
@@ -51,7 +52,7 @@ class SimResult:
 
     case: Case
     mesh: FabricMesh
-    section: RodSection
+    sections: list[RodSection]  # one per rod, in the order of mesh.rods and case.rod_paths()
     x_reference: np.ndarray  # (n, 3) unstretched fabric
     x_printed: np.ndarray  # (n, 3) pre-stretched, flat, at printing
     x_final: np.ndarray  # (n, 3) rest state after release
@@ -67,10 +68,17 @@ class SimResult:
 class Simulation:
     case: Case
     mesh: FabricMesh
-    section: RodSection
+    sections: list[RodSection]  # one per rod
     X3: np.ndarray
     fabric: list[ElementGroup]
     force_scale: float
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) rotation from the stretch frame (x along the stretch) to the drawing frame."""
+        rot = np.eye(3)
+        rot[:2, :2] = stretch_rotation(self.case.release.direction)
+        return rot
 
 
 def prepare(case: Case) -> Simulation:
@@ -79,15 +87,20 @@ def prepare(case: Case) -> Simulation:
     eps0 = case.release.eps0
     lam_y = lateral_stretch(eps0, f.nu)
     m = case.mesh
+    paths = case.rod_paths()
+    if case.pattern is None:  # rods along x: the structured grid can take them too
+        rods_in: list = case.segments()
+    else:
+        rods_in = [RodPath(p.points, b=p.b, id=p.id) for p in paths]
     mesh = build_mesh(
-        case.segments(), r.b, case.fabric_extent(), eps0=eps0, lam_y=lam_y,
+        rods_in, r.b, case.fabric_extent(), eps0=eps0, lam_y=lam_y,
         dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading, kind=m.kind,
-        h_far=m.h_far,
+        h_far=m.h_far, direction=case.release.direction,
     )
-    sec = RodSection(h=r.h, b=r.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t)
+    secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t) for p in paths]
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
     groups = fabric_groups(mesh, f.E, f.nu, f.t)
-    return Simulation(case, mesh, sec, X3, groups, force_scale=f.E * f.t * m.dx_rod)
+    return Simulation(case, mesh, secs, X3, groups, force_scale=f.E * f.t * m.dx_rod)
 
 
 def _clamped(mesh: FabricMesh) -> np.ndarray:
@@ -98,12 +111,15 @@ def _clamped(mesh: FabricMesh) -> np.ndarray:
 
 
 def clamp_positions(sim: Simulation, e: float, x: np.ndarray) -> np.ndarray:
-    """Copy of ``x`` with the clamped edges at clamp strain ``e`` (x scaled, y, z reference)."""
+    """Copy of ``x`` with the clamped edges at clamp strain ``e`` (stretch frame: x scaled,
+    y and z at their reference values)."""
     out = x.copy()
     clamp = _clamped(sim.mesh)
-    out[clamp, 0] = sim.X3[clamp, 0] * (1.0 + e)
-    out[clamp, 1] = sim.X3[clamp, 1]
-    out[clamp, 2] = 0.0
+    rot = sim.rotation
+    u = sim.X3[clamp] @ rot  # reference, stretch frame
+    u[:, 0] *= 1.0 + e
+    u[:, 2] = 0.0
+    out[clamp] = u @ rot.T
     return out
 
 
@@ -126,7 +142,8 @@ def _heights(sim: Simulation, x: np.ndarray) -> dict[str, float]:
     """Highest point of the rods' centre lines above their printed level (``max_height``, as
     in metrics.json), the largest deflection up or down (``max_deflection``) and the same per
     rod (``rod_max_deflection``)."""
-    z = [c[:, 2] - sim.section.offset for c in rod_centrelines(sim.mesh.rods, x, sim.section)]
+    z = [c[:, 2] - sk.offset for c, sk in
+         zip(rod_centrelines(sim.mesh.rods, x, sim.sections), sim.sections, strict=True)]
     return dict(max_height=float(max(np.max(zi) for zi in z)),
                 max_deflection=float(max(np.max(np.abs(zi)) for zi in z)),
                 rod_max_deflection=[float(np.max(np.abs(zi))) for zi in z])
@@ -140,7 +157,8 @@ def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
     # lateral contraction instead puts the elements next to the clamps' corners, held at y = Y,
     # in a state from which Newton ended with three of them folded over (a mirrored, higher
     # energy in-plane equilibrium: 427.9 against 418.0 N mm, 16 iterations; measured)
-    x = sim.X3 * np.array([1.0 + eps0, 1.0, 0.0])
+    rot = sim.rotation
+    x = ((sim.X3 @ rot) * np.array([1.0 + eps0, 1.0, 0.0])) @ rot.T
     x = clamp_positions(sim, eps0, x)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[_clamped(sim.mesh)] = True
@@ -175,7 +193,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
                          negative_curvature=so.negative_curvature,
                          linear_solver=so.linear_solver, modes=so.modes)
     x_print, pre = prestretch(sim, opts)
-    rods = rod_groups(sim.mesh.rods, x_print, sim.section)
+    rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[_clamped(sim.mesh)] = True
     asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods, fixed)
@@ -204,9 +222,9 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
         seed=imp.seed,
     )
     return SimResult(
-        case=case, mesh=sim.mesh, section=sim.section, x_reference=sim.X3, x_printed=x_print,
-        x_final=x, centerlines=rod_centrelines(sim.mesh.rods, x, sim.section),
-        centerlines_printed=rod_centrelines(sim.mesh.rods, x_print, sim.section),
+        case=case, mesh=sim.mesh, sections=sim.sections, x_reference=sim.X3, x_printed=x_print,
+        x_final=x, centerlines=rod_centrelines(sim.mesh.rods, x, sim.sections),
+        centerlines_printed=rod_centrelines(sim.mesh.rods, x_print, sim.sections),
         history=history, stats=stats, energies=asm.energy_by_group(x),
         element_energy={
             "fabric_membrane": asm.element_energies(x, "fabric_membrane"),
@@ -215,15 +233,18 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
 
 
 def _affine_predictor(x: np.ndarray, e_old: float, e_new: float, on_rod: np.ndarray,
-                      rod_nodes: list[np.ndarray]) -> np.ndarray:
-    """Fabric scaled in x with the clamps; each rod moved rigidly with its centroid."""
-    x_pred = x.copy()
+                      rod_nodes: list[np.ndarray], rot: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """Fabric scaled along the stretch with the clamps; each rod moved rigidly with its
+    centroid. ``rot``: stretch frame -> drawing frame (None: the same)."""
+    x_pred = x.copy() if rot is None else x @ rot
+    x_s = x_pred.copy()
     scale = (1.0 + e_new) / (1.0 + e_old)
     x_pred[~on_rod, 0] *= scale
     for ch_nodes in rod_nodes:
-        xc = x[ch_nodes, 0].mean()
+        xc = x_s[ch_nodes, 0].mean()
         x_pred[ch_nodes, 0] += xc * (scale - 1.0)
-    return x_pred
+    return x_pred if rot is None else x_pred @ rot.T
 
 
 def _chord_correction(asm: Assembly, solver, x_pred: np.ndarray) -> np.ndarray:
@@ -309,7 +330,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # the secant extrapolates the jump (measured on a thin rod: energy 219 N mm against
         # 18.5 before). A plain "lower energy" test picks the affine start too often (its
         # energy is lower but it is farther from the branch: 311 against 270 iterations).
-        x_pred = _affine_predictor(x, e_old, e_new, on_rod, rod_nodes)
+        x_pred = _affine_predictor(x, e_old, e_new, on_rod, rod_nodes,
+                                   sim.rotation if rel.direction else None)
         x_pred = clamp_positions(sim, e_new, x_pred)
         if x_prev is not None and e_prev is not None and e_prev != e_old and e_old != e_new:
             x_sec = x + (x - x_prev) * ((e_old - e_new) / (e_prev - e_old))
@@ -362,7 +384,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # the plane by more than twice their thickness (an imperfect, smooth onset; the curl
         # of the bilayer before buckling is a fraction of h)
         buckled = (buckled or res.negative_steps > 0
-                   or rec["max_deflection"] > BUCKLED_DEFLECTION * sim.section.h)
+                   or any(dk > BUCKLED_DEFLECTION * sk.h for dk, sk in
+                          zip(rec["rod_max_deflection"], sim.sections, strict=True)))
         de = _next_increment(de, de_nom, rel.max_step_factor, buckled, res, rel.onset_substeps)
     totals["release_steps"] = len(history) - 1
     totals["converged"] = True
