@@ -251,6 +251,10 @@ CASES: list[ErrorCase] = [
               ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
               env=(("UNDULATE_PARDISO_THREADS", "0"),)),
     # ---- patterns -----------------------------------------------------------------------
+    ErrorCase("gravity-size", "Case file (`undulate run CASE --out DIR`)",
+              "`gravity.g` beyond 1e6 mm/s^2",
+              _case_file('[gravity]\ng = [0.0, 0.0, -2e6]\n'),
+              ("gravity.g: each component must be within +-1e6 mm/s^2",)),
     ErrorCase("pattern-cross", _PAT,
               "`--pattern` with crossing lines",
               lambda d: (d / "x.svg").write_text(

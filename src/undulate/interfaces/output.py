@@ -323,9 +323,22 @@ def _height_limits(result) -> tuple[float, float]:
     return -lim, lim
 
 
+def _near_rods(result) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Corners (lo, hi) of the lines' box padded by 15 % of its size (at least 10 mm), clipped
+    to the sheet, and whether that crops the sheet."""
+    x = result.x_final
+    cls = np.concatenate(result.centerlines)
+    pad = max(0.15 * max(float(np.ptp(cls[:, 0])), float(np.ptp(cls[:, 1]))), 10.0)
+    lo = np.maximum(cls[:, :2].min(axis=0) - pad, x[:, :2].min(axis=0))
+    hi = np.minimum(cls[:, :2].max(axis=0) + pad, x[:, :2].max(axis=0))
+    cropped = bool(np.any(lo > x[:, :2].min(axis=0)) or np.any(hi < x[:, :2].max(axis=0)))
+    return lo, hi, cropped
+
+
 def plot_top_view(path: Path, result) -> None:
-    """Top view of the final shape: the fabric coloured by height z [mm] (diverging map,
-    0 = the print bed), each rod's centre line drawn and named at its start."""
+    """Top view of the final shape near the lines: the fabric coloured by height z [mm]
+    (diverging map, 0 = the print bed), each rod's centre line drawn and named at its start;
+    the title says when the sheet reaches beyond the picture."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -343,11 +356,15 @@ def plot_top_view(path: Path, result) -> None:
         ax.annotate(paths[k].id, cl[0, :2], fontsize=7, xytext=(-4, 3),
                     textcoords="offset points", ha="right")
     fig.colorbar(pc, ax=ax, label="height z [mm]", shrink=0.85)
+    lo_xy, hi_xy, cropped = _near_rods(result)
+    ax.set_xlim(lo_xy[0], hi_xy[0])
+    ax.set_ylim(lo_xy[1], hi_xy[1])
     ax.set_aspect("equal")
-    ax.set_xlabel("x [mm] (stretch direction)")
+    d = result.case.release.direction
+    ax.set_xlabel("x [mm]" + (" (stretch direction)" if d == 0 else f" (stretch at {d:g} deg)"))
     ax.set_ylabel("y [mm]")
-    ax.set_title(f"{result.case.name}: top view after release (fabric coloured by height)",
-                 fontsize=9)
+    ax.set_title(f"{result.case.name}: top view after release (fabric coloured by height"
+                 + ("; the sheet goes on beyond" if cropped else "") + ")", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -363,9 +380,7 @@ def plot_3d(path: Path, result) -> None:
     import matplotlib.pyplot as plt
 
     x = result.x_final
-    cls = np.concatenate(result.centerlines)
-    pad = 0.15 * max(float(np.ptp(cls[:, 0])), float(np.ptp(cls[:, 1])), 1.0)
-    lo_xy, hi_xy = cls[:, :2].min(axis=0) - pad, cls[:, :2].max(axis=0) + pad
+    lo_xy, hi_xy, _ = _near_rods(result)
     tris = result.mesh.tris
     cen = x[tris].mean(axis=1)
     keep = np.all((cen[:, :2] >= lo_xy) & (cen[:, :2] <= hi_xy), axis=1)

@@ -175,3 +175,8 @@ def inertia(x: jnp.ndarray, m_h2: jnp.ndarray, x_hat: jnp.ndarray) -> jnp.ndarra
     """Implicit-Euler inertia term of one node: m / (2 dt^2) |x - x_hat|^2 (x_hat: predicted)."""
     r = x[0] - x_hat
     return 0.5 * m_h2 * jnp.dot(r, r)
+
+
+def gravity(x: jnp.ndarray, w: jnp.ndarray) -> jnp.ndarray:
+    """Potential of a node's weight ``w = m g`` [N] (a constant body force): -w . x."""
+    return -jnp.dot(w, x[0])

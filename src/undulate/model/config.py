@@ -44,6 +44,7 @@ __all__ = [
     "PrintedRod",
     "Release",
     "Imperfection",
+    "Gravity",
     "MeshOptions",
     "SolverOptions",
     "Dynamics",
@@ -290,6 +291,28 @@ class Release(_Strict):
     )
 
 
+class Gravity(_Strict):
+    """A constant body force on fabric and rods during the release (off by default)."""
+
+    g: tuple[StrictFloat, StrictFloat, StrictFloat] = Field(
+        (0.0, 0.0, 0.0), strict=False,
+        description="acceleration of gravity in the drawing's frame [mm/s^2]: [0, 0, -9810] "
+        "for the sheet lying face up, [0, 9810, 0] hanging with the drawing's +y down "
+        "(at the bottom), [0, 0, 0] off",
+        json_schema_extra={"allowed": "each component within +-1e6"},
+    )
+
+    @model_validator(mode="after")
+    def _size(self) -> Gravity:
+        if any(abs(v) > 1e6 for v in self.g):
+            raise ValueError(f"g: each component must be within +-1e6 mm/s^2; got {self.g}")
+        return self
+
+    @property
+    def on(self) -> bool:
+        return any(v != 0.0 for v in self.g)
+
+
 class Imperfection(_Strict):
     """Small random out-of-plane noise added to the rods after printing."""
 
@@ -383,6 +406,7 @@ class Case(_Strict):
     rods: Rods = Field(default_factory=Rods)
     release: Release = Field(default_factory=Release)
     imperfection: Imperfection = Field(default_factory=Imperfection)
+    gravity: Gravity = Field(default_factory=Gravity)
     mesh: MeshOptions = Field(default_factory=MeshOptions)
     solver: SolverOptions = Field(default_factory=SolverOptions)
     mode: Literal["quasi-static", "inertial"] = Field(

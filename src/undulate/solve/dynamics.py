@@ -5,7 +5,8 @@ Each time step solves
     x_{n+1} = argmin_x  E(x) + sum_i m_i / (2 dt^2) |x_i - x_hat_i|^2,
     x_hat   = x_n + dt v_n / (1 + c dt),         v_{n+1} = (x_{n+1} - x_n) / dt
 
-with lumped masses m_i (fabric rho t A / 3 per triangle corner, rod rho_B b h per unit length)
+with lumped masses m_i (fabric rho t A / 3 per triangle corner, rod rho_B b h per unit length;
+the same masses carry the weight when ``case.gravity`` is on, :func:`gravity_group`)
 and mass-proportional damping c. The inertia term is just another element group, so the same
 Newton solver (and its negative-curvature handling) is reused. Clamps move linearly from eps0
 to 0 over ``release_time``; then the structure settles for ``settle_time``. Implicit Euler is
@@ -18,11 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanics.assemble import Assembly, ElementGroup
-from ..mechanics.fabric import inertia
+from ..mechanics.fabric import gravity, inertia
 from .linear import make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
 
-__all__ = ["lumped_masses", "release_inertial"]
+__all__ = ["lumped_masses", "gravity_group", "release_inertial"]
 
 
 def lumped_masses(sim) -> np.ndarray:
@@ -38,10 +39,23 @@ def lumped_masses(sim) -> np.ndarray:
     for c in range(3):
         m += np.bincount(tri[:, c], weights=case.fabric.rho * case.fabric.t * A0 / 3.0,
                          minlength=mesh.n_nodes)
-    r = case.rods
-    for ch in mesh.rods:
-        m[ch.p] += r.rho_B * r.b * r.h * case.mesh.dx_rod
+    for ch, sec, path in zip(mesh.rods, sim.sections, case.rod_paths(), strict=True):
+        seg = path.length / max(ch.n_nodes - 1, 1)  # nodes are equally spaced along the rod
+        ln = np.full(ch.n_nodes, seg)
+        ln[[0, -1]] = 0.5 * seg
+        m[ch.p] += case.rods.rho_B * sec.b * sec.h * ln
     return m
+
+
+def gravity_group(sim, free: np.ndarray) -> ElementGroup | None:
+    """The weight of fabric and rods (lumped masses times ``case.gravity.g``) on the free
+    nodes, or None when gravity is off."""
+    grav = sim.case.gravity
+    if not grav.on:
+        return None
+    nodes = np.nonzero(free)[0]
+    w = lumped_masses(sim)[nodes, None] * np.asarray(grav.g, dtype=float)[None, :]
+    return ElementGroup("gravity", gravity, nodes[:, None], (w,))
 
 
 def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, progress):

@@ -196,7 +196,10 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[_clamped(sim.mesh)] = True
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods, fixed)
+    from .dynamics import gravity_group
+
+    weight = gravity_group(sim, ~fixed.all(axis=1))  # acts from the start of the release
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods + ([weight] if weight else []), fixed)
     rng = np.random.default_rng(case.imperfection.seed)
     x = x_print.copy()
     imp = case.imperfection
