@@ -153,3 +153,19 @@ def test_chord_correction_takes_the_factored_step_only_when_it_lowers_the_energy
     np.testing.assert_array_equal(_chord_correction(q, uphill, x0), x0)
     broken = SimpleNamespace(solve=lambda r: np.full_like(r, np.nan))
     np.testing.assert_array_equal(_chord_correction(q, broken, x0), x0)
+
+
+def test_partial_release_stops_the_clamps_at_final_strain():
+    """release.final_strain = 0.3: the clamps go from 0.5 to 0.3 in the nominal steps of that
+    span and stop there (the fabric stays stretched); final_strain >= eps0 is refused."""
+    data = SMALL | {"release": SMALL["release"] | {"final_strain": 0.3, "max_step_factor": 1.0}}
+    r = api.simulate(case_from_dict(data))
+    clamp = [h["clamp_strain"] for h in r.history]
+    assert clamp[-1] == pytest.approx(0.3, abs=1e-12) and min(clamp) >= 0.3 - 1e-12
+    n = data["release"]["steps"]
+    assert len(clamp) == n + 1  # the start and n steps of 0.2 / n
+    assert clamp[1] == pytest.approx(0.5 - 0.2 / n)
+    from undulate.model import ConfigError
+
+    with pytest.raises(ConfigError, match=r"release.final_strain: must be below eps0 = 0.5"):
+        case_from_dict(SMALL | {"release": SMALL["release"] | {"final_strain": 0.5}})

@@ -260,6 +260,11 @@ class Release(_Strict):
         "(counter-clockwise); the clamps hold the fabric's two edges across it",
     )
     steps: int = Field(40, ge=1, le=100000, description="number of release increments")
+    final_strain: float = Field(
+        0.0, ge=0.0, le=3.0,
+        description="clamp strain where the release stops (0: a full release; a partial "
+        "release leaves the fabric stretched by this much)",
+    )
     adaptive: bool = Field(True, description="cut the increment when a step fails to converge")
     min_step_fraction: float = Field(
         1e-3, gt=0.0, le=1.0, description="smallest increment as a fraction of the nominal one"
@@ -289,6 +294,15 @@ class Release(_Strict):
         description="increment, as a fraction of the nominal one, down to which steps with a "
         "change of pattern are halved (see snap_iterations)",
     )
+
+
+
+    @model_validator(mode="after")
+    def _stop_below_start(self) -> Release:
+        if self.final_strain >= self.eps0:
+            raise ValueError(f"final_strain: must be below eps0 = {self.eps0:g} (the clamps "
+                             f"move from eps0 down to it); got {self.final_strain:g}")
+        return self
 
 
 class Gravity(_Strict):

@@ -78,7 +78,8 @@ def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, pro
     totals = dict(newton_iterations=0, negative_curvature_steps=0, time_steps=0)
     n_total = n_rel + n_set
     for k in range(1, n_total + 1):
-        e = eps0 * max(0.0, 1.0 - k / n_rel)
+        e = sim.case.release.final_strain + (eps0 - sim.case.release.final_strain) * max(
+            0.0, 1.0 - k / n_rel)
         x_hat = x + dt * v / (1.0 + dyn.damping * dt)
         grp.set_params(mass[free_nodes] / dt**2, x_hat[free_nodes])
         x0 = clamp_positions(sim, e, x_hat)

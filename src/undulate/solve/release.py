@@ -9,7 +9,8 @@
    stress-free there.
 3. **Imperfection.** A smooth random out-of-plane displacement (RMS ``amplitude``, correlation
    length ``correlation``, from ``seed``) is added under the rods.
-4. **Release.** The clamp strain goes from eps0 to 0. Quasi-static: nominal increments,
+4. **Release.** The clamp strain goes from eps0 to ``release.final_strain`` (0: all the
+   way). Quasi-static: nominal increments,
    growing on the smooth buckled branch and cut in half (when ``adaptive``) on failure or
    when a grown step holds a change of the rods' pattern (``snap_iterations``), each solved to
    a *stable* equilibrium by :func:`undulate.solve.newton.minimize` from a predictor.
@@ -297,7 +298,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
                          progress: ProgressFn | None) -> tuple[np.ndarray, list[dict], dict]:
     rel = sim.case.release
     eps0 = rel.eps0
-    de_nom = eps0 / rel.steps
+    e_end = rel.final_strain  # the clamps stop here (0: a full release)
+    de_nom = (eps0 - e_end) / rel.steps
     de_min = de_nom * rel.min_step_fraction
     e = eps0
     de = de_nom / rel.onset_substeps
@@ -324,7 +326,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         else:
             # equal increments add up to eps0 only to roundoff: a remainder of 1e-17 would
             # otherwise make an extra, empty step
-            e_old, e_new = e, (e - de if e - de > 1e-9 * eps0 else 0.0)
+            e_old, e_new = e, (e - de if e - de > e_end + 1e-9 * eps0 else e_end)
         # predictor: the secant of the last two equilibria when there are two (it follows the
         # buckled branch; measured on the default rod: 146 Newton iterations against 226 for
         # the affine predictor alone, same final state) unless its energy is more than twice
@@ -380,8 +382,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
                    rod_negative_steps=res.watched_steps, residual=res.residual)
         history.append(rec)
         if progress is not None:
-            progress((eps0 - e) / eps0, rec)
-        if e <= 0.0:
+            progress((eps0 - e) / (eps0 - e_end), rec)
+        if e <= e_end:
             break
         # buckled: a step needed negative curvature (a bifurcation), or the rods stand out of
         # the plane by more than twice their thickness (an imperfect, smooth onset; the curl
