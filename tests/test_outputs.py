@@ -136,6 +136,7 @@ def test_overwrite_replaces_the_previous_run(tmp_path: Path) -> None:
     """--overwrite into the folder of an earlier five-rod run: no rod_3_*.png stays behind."""
     out = tmp_path / "run"
     out.mkdir()
+    (out / "top_view.png").write_text("old")  # every picture of a run is its own
     for k in range(5):
         (out / f"rod_{k}_side.png").write_text("old")
         (out / f"rod_{k}_fits.png").write_text("old")

@@ -10,6 +10,8 @@ Directory layout written by :func:`write_result`::
     DIR/metrics.json       inputs, solver statistics, history, seed, version, per-rod results
     DIR/rod_<k>_side.png   z along x of each rod's centre line
     DIR/rod_<k>_fits.png   the sine and arc-chain fits (written by :func:`undulate.api.run_case`)
+    DIR/top_view.png       the sheet near the rods from above, coloured by height
+    DIR/view_3d.png        the final shape near the rods in 3D, coloured by height
 
 A run never leaves a half-written ``DIR``: :class:`StagedDir` makes a hidden sibling folder
 ``.DIR.incomplete-XXXX``, every file is written there, and only when all are complete is it
@@ -49,7 +51,8 @@ INCOMPLETE_TAG = ".incomplete-"
 """Part of the name of a run folder still being written (see :class:`StagedDir`)."""
 
 _RUN_FILE = re.compile(
-    r"(final\.vtu|printed\.vtu|centerlines\.npz|metrics\.json|rod_\d+_(side|fits)\.png)"
+    r"(final\.vtu|printed\.vtu|centerlines\.npz|metrics\.json|rod_\d+_(side|fits)\.png"
+    r"|top_view\.png|view_3d\.png)"
 )
 
 
