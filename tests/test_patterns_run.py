@@ -202,6 +202,7 @@ def test_a_line_turned_with_the_stretch_gives_the_same_waves() -> None:
         c, s = math.cos(math.radians(th)), math.sin(math.radians(th))
         d = _case([{"points": [[-20 * c, -20 * s], [20 * c, 20 * s]]}])
         d["rods"] = {"h": 0.12}
+        d["fabric"] = {"margin_x": 15.0, "margin_y": 15.0}
         d["mesh"]["dx_rod"] = 1.0
         d["release"] = {"steps": 10, "direction": th}
         out[th] = api.run_case(case_from_dict(d), None, artifacts=False)
