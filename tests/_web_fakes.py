@@ -23,13 +23,16 @@ ROD_POINTS = 31
 
 
 def fake_rods(case: dict) -> list[np.ndarray]:
-    """The rods' centre lines of the fake final.vtu: (ROD_POINTS, 3) per segment."""
+    """The rods' centre lines of the fake final.vtu: (ROD_POINTS, 3) per line of the case's
+    pattern (sampled along its polyline, three half-waves)."""
     out = []
-    for seg in case["rods"]["segments"]:
-        (x0, y0), length = seg["start"], seg["length"]
-        x = np.linspace(x0, x0 + length, ROD_POINTS)
-        z = 0.5 + 2.0 * np.sin(3 * np.pi * (x - x0) / length)
-        out.append(np.column_stack([x, np.full_like(x, y0), z]))
+    for line in case["pattern"]["lines"]:
+        pts = np.asarray(line["points"], dtype=float)
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        t = np.linspace(0.0, s[-1], ROD_POINTS)
+        xy = np.column_stack([np.interp(t, s, pts[:, 0]), np.interp(t, s, pts[:, 1])])
+        z = 0.5 + 2.0 * np.sin(3 * np.pi * t / s[-1])
+        out.append(np.column_stack([xy, z]))
     return out
 
 
@@ -70,7 +73,7 @@ def fake_job(folder: str) -> None:
         _write_state(f, st)
     res = f / "result"
     res.mkdir()
-    (res / "metrics.json").write_text(json.dumps({"n": 3, "rods": len(case["rods"]["segments"])}))
+    (res / "metrics.json").write_text(json.dumps({"n": 3, "rods": len(case["pattern"]["lines"])}))
     write_fake_vtu(res / "final.vtu", case)
     st.update(status="done", finished=time.time(), metrics={"n": 3, "family": "waves"})
     _write_state(f, st)

@@ -83,7 +83,10 @@ def test_predict_inclined_and_across_lines(client: TestClient) -> None:
     assert 0 < diag["eps_line"] < 0.5 and diag["angle_deg"] == pytest.approx(45.0)
     assert across["eps_line"] < 0 and across["family"] == "flat" and across["n"] == 0
     assert any("45 deg" in w for w in out["warnings"])
-    assert out["simulable"] is False and "along the stretch" in out["simulable_reason"]
+    assert out["simulable"] is True  # inclined lines are a pattern the engine runs
+    sharp = [{"id": "v", "points": [[0.0, 0.0], [25.0, 25.0], [50.0, 0.0]]}]
+    out = client.post("/api/predict", json={"lines": sharp}).json()
+    assert out["simulable"] is False and "line v: bends with a radius" in out["simulable_reason"]
 
 
 @pytest.mark.parametrize(("body", "needle"), [
@@ -173,8 +176,9 @@ def test_queue_limit_cancel_and_unknown_job(client: TestClient) -> None:
 
 
 def test_job_refuses_what_the_engine_cannot_simulate(client: TestClient) -> None:
-    r = client.post("/api/jobs", json={"lines": [{"points": [[0.0, 0.0], [50.0, 20.0]]}]})
-    assert r.status_code == 422 and "straight lines along the stretch" in r.json()["error"]
+    r = client.post("/api/jobs", json={"lines": [{"id": "v", "points": [[0.0, 0.0], [25.0, 25.0],
+                                                                    [50.0, 0.0]]}]})
+    assert r.status_code == 422 and "line v: bends with a radius of" in r.json()["error"]
     r = client.post("/api/jobs", json={"lines": FAMILY, "quality": "best"})
     assert r.status_code == 422 and r.json()["error"].startswith("quality:")
 
@@ -309,9 +313,7 @@ def test_shape_of_a_finished_job(client: TestClient) -> None:
     r = client.get(f"/api/jobs/{jid}/shape")
     assert r.status_code == 200, r.text
     shape = r.json()
-    case = {"rods": {"segments": [{"start": [-30.0, 6.0], "length": 60.0},
-                                  {"start": [-20.0, -6.0], "length": 60.0}]}}
-    want = fake_rods(case)
+    want = fake_rods({"pattern": {"lines": lines}})
     assert len(shape["rods"]) == 2  # one chain per rod, not one joined line
     for got, w in zip(shape["rods"], want, strict=True):
         assert np.array(got) == pytest.approx(w, abs=1e-3)

@@ -16,8 +16,10 @@ Routes (JSON in and out; every bad input is a 422 with ``{"error": "<field>: <pr
 Each browser gets a random client id (cookie ``undulate_client``): it sees only its own jobs.
 Request bodies are limited to :data:`MAX_BODY` bytes.
 
-The simulation is the real engine (``undulate run``): straight lines along the stretch (x),
-any lengths and positions. Other lines get the analytical prediction only.
+The simulation is the real engine (``undulate run``) on the drawn lines as a pattern: any
+angle, curved too, any lengths and positions, each line's own h and b. Lines the rods' mesh
+cannot follow (a bend tighter than the case file allows) get the analytical prediction only,
+with the reason.
 """
 
 from __future__ import annotations
@@ -104,23 +106,22 @@ def _check_params(p: Params) -> list[Line]:
 
 def case_from_lines(p: Params, lines: list[Line], *, quality: str = "quick", seed: int = 0,
                     name: str = "web") -> dict[str, Any]:
-    """A case (dict, as a case file) for straight lines along x; PatternError otherwise."""
-    segs = []
+    """A case (dict, as a case file) whose pattern is the drawn lines: straight or curved, at
+    any angle, each with its own h and b if given. The case's own rules (bends the rods can
+    follow, lines long enough for the mesh) are checked by :func:`simulable`."""
+    pattern = []
     for ln in lines:
-        if not ln.is_straight(1e-3) or abs(ln.chord[1]) > 1e-6 * ln.length:
-            raise PatternError(
-                f"line {ln.id}: the simulation takes straight lines along the stretch (x) "
-                f"only; this one is {'curved' if not ln.is_straight(1e-3) else 'inclined'} "
-                f"({ln.angle_deg:.1f} deg). Its analytical prediction is shown instead")
-        if (ln.h not in (None, p.h)) or (ln.b not in (None, p.b)):
-            raise PatternError(f"line {ln.id}: the simulation takes one h and b for all lines;"
-                               " remove this line's own h or b")
-        x0 = float(min(ln.points[0, 0], ln.points[-1, 0]))
-        segs.append({"start": [x0, float(ln.points[0, 1])], "length": ln.length})
+        item: dict[str, Any] = {"id": ln.id, "points": ln.points.tolist()}
+        if ln.h is not None:
+            item["h"] = ln.h
+        if ln.b is not None:
+            item["b"] = ln.b
+        pattern.append(item)
     case: dict[str, Any] = {
         "name": name,
         "fabric": {"E": p.E, "t": p.t, "nu": p.nu},
-        "rods": {"h": p.h, "b": p.b, "E_B": p.E_B, "segments": segs},
+        "rods": {"h": p.h, "b": p.b, "E_B": p.E_B},
+        "pattern": {"lines": pattern},
         "release": {"eps0": p.eps0},
         "imperfection": {"seed": seed},
     }
@@ -304,10 +305,12 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
         lines = _check_params(p)
         out = predict_lines(lines, h=p.h, eps0=p.eps0, b=p.b, E_B=p.E_B, E=p.E, t=p.t,
                             nu=p.nu)
+        from ...model import ConfigError, case_from_dict
+
         try:
-            case_from_lines(p, lines)
+            case_from_dict(case_from_lines(p, lines))
             out["simulable"], out["simulable_reason"] = True, ""
-        except PatternError as err:
+        except (PatternError, ConfigError) as err:
             out["simulable"], out["simulable_reason"] = False, str(err)
         return out
 
