@@ -714,15 +714,7 @@ def with_drawing(data: dict, drawing: str | Path, *, scale: object = 1.0) -> Cas
         drawn = read_pattern(drawing, scale=float(scale), resolution=float(res))
     except PatternError as err:
         raise ConfigError(f"{Path(drawing).name}: {err}") from None
-    lines = list(pat.get("lines") or [])
-    for ln in drawn:
-        item: dict[str, Any] = {"id": ln.id, "points": ln.points.tolist()}
-        if ln.h is not None:
-            item["h"] = ln.h
-        if ln.b is not None:
-            item["b"] = ln.b
-        lines.append(item)
-    pat["lines"] = lines
+    pat["lines"] = list(pat.get("lines") or []) + [ln.to_dict() for ln in drawn]
     return case_from_dict({**data, "pattern": pat})
 
 

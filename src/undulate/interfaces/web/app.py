@@ -108,15 +108,9 @@ def case_from_lines(p: Params, lines: list[Line], *, quality: str = "quick", see
                     name: str = "web") -> dict[str, Any]:
     """A case (dict, as a case file) whose pattern is the drawn lines: straight or curved, at
     any angle, each with its own h and b if given. The case's own rules (bends the rods can
-    follow, lines long enough for the mesh) are checked by :func:`simulable`."""
-    pattern = []
-    for ln in lines:
-        item: dict[str, Any] = {"id": ln.id, "points": ln.points.tolist()}
-        if ln.h is not None:
-            item["h"] = ln.h
-        if ln.b is not None:
-            item["b"] = ln.b
-        pattern.append(item)
+    follow, lines long enough for the mesh) are checked when it is validated
+    (``case_from_dict``)."""
+    pattern = [ln.to_dict() for ln in lines]
     case: dict[str, Any] = {
         "name": name,
         "fabric": {"E": p.E, "t": p.t, "nu": p.nu},
