@@ -16,7 +16,12 @@ from scipy.optimize import brentq
 from ..mesh import FabricMesh, RodChain
 from .assemble import ElementGroup
 from .compiled import CachedJit
-from .fabric import hinge_bending, neo_hookean_membrane
+from .fabric import (
+    hinge_bending,
+    neo_hookean_membrane,
+    orthotropic_membrane,
+    orthotropic_stiffness,
+)
 from .rod import (
     edge_length,
     node_strains,
@@ -76,8 +81,12 @@ def lame_plane_stress(E: float, nu: float) -> tuple[float, float]:
     return E / (2.0 * (1.0 + nu)), E * nu / (1.0 - nu**2)
 
 
-def lateral_stretch(eps0: float, nu: float) -> float:
-    """Lateral stretch lam_y of the membrane law under free uniaxial stretch 1 + eps0."""
+def lateral_stretch(eps0: float, nu: float, *, orthotropic: bool = False) -> float:
+    """Lateral stretch lam_y of the membrane law under free uniaxial stretch 1 + eps0 (along
+    a material axis for the orthotropic law: lam_y^2 = 1 - nu ((1 + eps0)^2 - 1), from
+    S_yy = 0 with Green strains)."""
+    if orthotropic:
+        return float(np.sqrt(1.0 - nu * ((1.0 + eps0) ** 2 - 1.0)))
     mu, lam2 = lame_plane_stress(1.0, nu)
     lx = 1.0 + eps0
     if lam2 == 0.0:
@@ -85,8 +94,15 @@ def lateral_stretch(eps0: float, nu: float) -> float:
     return float(brentq(lambda ly: mu * (ly**2 - 1.0) + lam2 * np.log(lx * ly), 1e-3, 1.0))
 
 
-def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float) -> list[ElementGroup]:
-    """Membrane (per triangle) and bending (per interior edge) groups of the fabric."""
+def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float, *,
+                  E_y: float | None = None, G: float | None = None,
+                  direction: float = 0.0) -> list[ElementGroup]:
+    """Membrane (per triangle) and bending (per interior edge) groups of the fabric.
+
+    Isotropic neo-Hookean (E, nu), or with ``E_y`` and ``G`` an orthotropic knit: E along the
+    stretch (at ``direction`` degrees in the mesh's frame), E_y across it, nu the contraction
+    across under a pull along, G the in-plane shear modulus; its bending stiffness uses
+    sqrt(E E_y)."""
     X = mesh.X
     tri = mesh.tris
     D0 = X[tri[:, 1]] - X[tri[:, 0]]
@@ -97,20 +113,32 @@ def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float) -> list[Eleme
         raise ValueError("mesh: triangles must be counter-clockwise with positive area")
     Dm_inv = np.linalg.inv(Dm)
     A0 = 0.5 * det
-    mu, lam2 = lame_plane_stress(E, nu)
     n = tri.shape[0]
-    membrane = ElementGroup(
-        "fabric_membrane",
-        neo_hookean_membrane,
-        tri,
-        (Dm_inv, A0, np.full(n, mu), np.full(n, lam2), np.full(n, t)),
-    )
+    if E_y is None:
+        mu, lam2 = lame_plane_stress(E, nu)
+        membrane = ElementGroup(
+            "fabric_membrane",
+            neo_hookean_membrane,
+            tri,
+            (Dm_inv, A0, np.full(n, mu), np.full(n, lam2), np.full(n, t)),
+        )
+        E_bend = E
+    else:
+        if G is None:
+            raise ValueError("fabric: an orthotropic knit needs its shear modulus G")
+        from ..mesh import stretch_rotation
+
+        Q = np.tile(orthotropic_stiffness(E, E_y, nu, G), (n, 1))
+        R = np.tile(stretch_rotation(direction), (n, 1, 1))
+        membrane = ElementGroup("fabric_membrane", orthotropic_membrane, tri,
+                                (Dm_inv, A0, Q, R, np.full(n, t)))
+        E_bend = float(np.sqrt(E * E_y))
     hin = mesh.hinges()
     # areas of the two triangles at each hinge
     e_len2 = np.sum((X[hin[:, 1]] - X[hin[:, 0]]) ** 2, axis=1)
     a_a = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 2]] - X[hin[:, 0]]))
     a_b = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 3]] - X[hin[:, 0]]))
-    D = E * t**3 / (12.0 * (1.0 - nu**2))
+    D = E_bend * t**3 / (12.0 * (1.0 - nu**2))
     k = D * mesh.hinge_factor * e_len2 / (a_a + a_b)
     bending = ElementGroup("fabric_bending", hinge_bending, hin, (k,))
     return [membrane, bending]

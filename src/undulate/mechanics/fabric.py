@@ -48,6 +48,33 @@ def neo_hookean_membrane(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
     return t * A0 * W
 
 
+def orthotropic_membrane(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
+                         Q: jnp.ndarray, R: jnp.ndarray, t: jnp.ndarray) -> jnp.ndarray:
+    """Strain energy [N mm] of one triangle of an orthotropic knit (St Venant-Kirchhoff).
+
+    The Green strain E = (C - I) / 2 is turned into the material axes (``R``: 2 x 2, columns
+    the axes in the mesh's frame) and W = 1/2 [Q11 e11^2 + 2 Q12 e11 e22 + Q22 e22^2 +
+    4 Q66 e12^2] with ``Q = (Q11, Q12, Q22, Q66)`` the plane-stress stiffnesses of
+    (E1, E2, nu12, G12): exact linear orthotropic elasticity at small strains. Unlike the
+    neo-Hookean law it softens in strong compression (stretches below about 0.6).
+    """
+    Ds = jnp.stack([x[1] - x[0], x[2] - x[0]], axis=1)
+    F = Ds @ Dm_inv
+    Eg = 0.5 * (F.T @ F - jnp.eye(2))
+    e = R.T @ Eg @ R
+    W = 0.5 * (Q[0] * e[0, 0] ** 2 + 2.0 * Q[1] * e[0, 0] * e[1, 1] + Q[2] * e[1, 1] ** 2
+               + 4.0 * Q[3] * e[0, 1] ** 2)
+    return t * A0 * W
+
+
+def orthotropic_stiffness(E1: float, E2: float, nu12: float, G12: float
+                          ) -> tuple[float, float, float, float]:
+    """(Q11, Q12, Q22, Q66) of plane-stress orthotropic elasticity (nu21 = nu12 E2 / E1)."""
+    nu21 = nu12 * E2 / E1
+    d = 1.0 - nu12 * nu21
+    return E1 / d, nu12 * E2 / d, E2 / d, G12
+
+
 def _membrane_grad_hess(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
                         mu: jnp.ndarray, lam2: jnp.ndarray, t: jnp.ndarray
                         ) -> tuple[jnp.ndarray, jnp.ndarray]:

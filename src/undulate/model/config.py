@@ -68,10 +68,21 @@ PosFloat = Annotated[float, Field(gt=0.0)]
 
 
 class Fabric(_Strict):
-    """The knitted textile, modelled as an isotropic hyperelastic sheet."""
+    """The knitted textile: an isotropic hyperelastic sheet, or orthotropic with E_y and G.
 
-    E: float = Field(0.45, gt=0.0, le=1e4, description="Young's modulus [MPa]")
+    Isotropic: compressible neo-Hookean (E, nu). Orthotropic (``E_y`` and ``G`` given): St
+    Venant-Kirchhoff with E along the stretch, E_y across it, nu the contraction across
+    under a pull along, G the in-plane shear modulus (docs/model.md, "Orthotropic knit")."""
+
+    E: float = Field(0.45, gt=0.0, le=1e4,
+                     description="Young's modulus [MPa] (orthotropic: along the stretch)")
     nu: float = Field(0.3, ge=0.0, lt=0.5, description="Poisson ratio [-]")
+    E_y: float | None = Field(
+        None, gt=0.0, le=1e4,
+        description="orthotropic knit: Young's modulus across the stretch [MPa] (not set: "
+        "isotropic)")
+    G: float | None = Field(
+        None, gt=0.0, le=1e4, description="orthotropic knit: in-plane shear modulus [MPa]")
     t: float = Field(0.4, gt=0.0, le=20.0, description="thickness [mm]")
     rho: float = Field(1.2e-9, gt=0.0, description="density [t/mm^3] (inertial mode only)")
     margin_x: float = Field(
@@ -433,6 +444,23 @@ class Case(_Strict):
         None, description="lines of any direction and shape instead of [rods] N, s, L, "
         "segments (which must then be left out)"
     )
+
+    @model_validator(mode="after")
+    def _knit(self) -> Case:
+        f = self.fabric
+        if (f.E_y is None) != (f.G is None):
+            raise ValueError("fabric.E_y: an orthotropic knit needs both E_y and G (or "
+                             "neither, for the isotropic sheet)")
+        if f.E_y is not None:
+            if f.nu**2 * f.E_y / f.E >= 1.0:
+                raise ValueError(f"fabric.nu: must be below sqrt(E / E_y) = "
+                                 f"{math.sqrt(f.E / f.E_y):.3g} for an orthotropic knit")
+            e0 = self.release.eps0
+            if 1.0 - f.nu * ((1.0 + e0) ** 2 - 1.0) <= 0.1:
+                raise ValueError(f"release.eps0: {e0:g} is too large a stretch for the "
+                                 f"orthotropic (St Venant-Kirchhoff) knit with nu = {f.nu:g}: "
+                                 "it must keep 1 - nu ((1 + eps0)^2 - 1) above 0.1")
+        return self
 
     @model_validator(mode="after")
     def _geometry(self) -> Case:

@@ -86,7 +86,7 @@ def prepare(case: Case) -> Simulation:
     """Mesh the case and build the fabric's element groups."""
     f, r = case.fabric, case.rods
     eps0 = case.release.eps0
-    lam_y = lateral_stretch(eps0, f.nu)
+    lam_y = lateral_stretch(eps0, f.nu, orthotropic=f.E_y is not None)
     m = case.mesh
     paths = case.rod_paths()
     if case.pattern is None:  # rods along x: the structured grid can take them too
@@ -100,7 +100,8 @@ def prepare(case: Case) -> Simulation:
     )
     secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t) for p in paths]
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
-    groups = fabric_groups(mesh, f.E, f.nu, f.t)
+    groups = fabric_groups(mesh, f.E, f.nu, f.t, E_y=f.E_y, G=f.G,
+                           direction=case.release.direction)
     return Simulation(case, mesh, secs, X3, groups, force_scale=f.E * f.t * m.dx_rod)
 
 
