@@ -251,6 +251,13 @@ CASES: list[ErrorCase] = [
               ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
               env=(("UNDULATE_PARDISO_THREADS", "0"),)),
     # ---- patterns -----------------------------------------------------------------------
+    ErrorCase("knit-half", "Case file (`undulate run CASE --out DIR`)",
+              "`fabric.E_y` without `fabric.G`", _case_file('[fabric]\nE_y = 0.2\n'),
+              ("fabric.E_y: an orthotropic knit needs both E_y and G",)),
+    ErrorCase("knit-stretch", "Case file (`undulate run CASE --out DIR`)",
+              "an orthotropic knit stretched too far",
+              _case_file('[fabric]\nE_y = 0.2\nG = 0.1\n[release]\neps0 = 2.0\n'),
+              ("release.eps0: 2 is too large a stretch for the orthotropic",)),
     ErrorCase("gravity-size", "Case file (`undulate run CASE --out DIR`)",
               "`gravity.g` beyond 1e6 mm/s^2",
               _case_file('[gravity]\ng = [0.0, 0.0, -2e6]\n'),
