@@ -85,3 +85,32 @@ def test_gravity_setting_is_checked_and_runs() -> None:
     # weight pulls the whole sheet down: its lowest point goes below the one without weight
     assert heavy.x_final[:, 2].min() < up.x_final[:, 2].min() - 0.05
     assert "gravity" in heavy.energies and heavy.energies["gravity"] != 0.0
+
+
+def test_edge_tension_pulls_the_free_edges_outwards() -> None:
+    """fabric.edge_tension: the free edges carry T per mm of unstretched edge, outwards
+    (across the stretch, turned with it), and the printed sheet is wider for it."""
+    from undulate.mechanics.build import edge_tension_group
+
+    mesh = _strip(100.0, 20.0, 21, 5)
+    mesh.node_sets.update(bottom=np.arange(21), top=84 + np.arange(21))
+    g = edge_tension_group(mesh, 0.01, 0.0)
+    w = g.params[0]
+    bottom, top = w[:21], w[21:]
+    assert bottom[:, 1].sum() == pytest.approx(-0.01 * 100.0)
+    assert top[:, 1].sum() == pytest.approx(0.01 * 100.0)
+    assert np.allclose(w[:, [0, 2]], 0.0)
+    turned = edge_tension_group(mesh, 0.01, 90.0).params[0]
+    assert turned[21:, 0].sum() == pytest.approx(-1.0)  # "top" is then at -x
+    assert edge_tension_group(mesh, 0.0) is None
+    from undulate.solve.release import prepare, prestretch
+
+    base = {"rods": {"h": 0.3, "L": 30.0}, "fabric": {"margin_x": 8.0, "margin_y": 8.0},
+            "mesh": {"dx_rod": 1.5, "h_far": 6.0}}
+    widths = []
+    for T in (0.0, 0.02):
+        sim = prepare(case_from_dict({**base, "fabric": {**base["fabric"], "edge_tension": T}}))
+        x, _ = prestretch(sim, NewtonOptions(negative_curvature=False))
+        mid = np.abs(x[:, 0]) < 2.0
+        widths.append(float(np.ptp(x[mid, 1])))
+    assert widths[1] > widths[0] * 1.02

@@ -17,6 +17,7 @@ from ..mesh import FabricMesh, RodChain
 from .assemble import ElementGroup
 from .compiled import CachedJit
 from .fabric import (
+    dead_load,
     hinge_bending,
     neo_hookean_membrane,
     orthotropic_membrane,
@@ -37,6 +38,7 @@ __all__ = [
     "lame_plane_stress",
     "lateral_stretch",
     "fabric_groups",
+    "edge_tension_group",
     "rod_stencils",
     "rod_groups",
     "rod_centrelines",
@@ -142,6 +144,31 @@ def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float, *,
     k = D * mesh.hinge_factor * e_len2 / (a_a + a_b)
     bending = ElementGroup("fabric_bending", hinge_bending, hin, (k,))
     return [membrane, bending]
+
+
+def edge_tension_group(mesh: FabricMesh, T: float, direction: float = 0.0
+                       ) -> ElementGroup | None:
+    """A pull of ``T`` [N per mm of unstretched edge] on the two free edges across the stretch
+    ("bottom" and "top"), outwards along the fabric's plane (a dead load: its direction does
+    not follow the edge); None for T = 0. Each edge node carries half of its two neighbouring
+    segments."""
+    if T == 0.0:
+        return None
+    from ..mesh import stretch_rotation
+
+    rot = stretch_rotation(direction)
+    nodes, forces = [], []
+    for name, sign in (("bottom", -1.0), ("top", 1.0)):
+        idx = mesh.node_sets[name]
+        seg = np.linalg.norm(np.diff(mesh.X[idx], axis=0), axis=1)
+        share = np.zeros(len(idx))
+        share[:-1] += 0.5 * seg
+        share[1:] += 0.5 * seg
+        normal = rot @ np.array([0.0, sign])  # outwards, in the mesh's frame
+        nodes.append(idx)
+        forces.append(T * share[:, None] * np.r_[normal, 0.0][None, :])
+    return ElementGroup("edge_tension", dead_load, np.concatenate(nodes)[:, None],
+                        (np.concatenate(forces),))
 
 
 def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -204,6 +204,7 @@ def inertia(x: jnp.ndarray, m_h2: jnp.ndarray, x_hat: jnp.ndarray) -> jnp.ndarra
     return 0.5 * m_h2 * jnp.dot(r, r)
 
 
-def gravity(x: jnp.ndarray, w: jnp.ndarray) -> jnp.ndarray:
-    """Potential of a node's weight ``w = m g`` [N] (a constant body force): -w . x."""
+def dead_load(x: jnp.ndarray, w: jnp.ndarray) -> jnp.ndarray:
+    """Potential of a constant force ``w`` [N] on one node (its weight m g, or its share of
+    a tension on an edge): -w . x."""
     return -jnp.dot(w, x[0])

@@ -84,6 +84,11 @@ class Fabric(_Strict):
     G: float | None = Field(
         None, gt=0.0, le=1e4, description="orthotropic knit: in-plane shear modulus [MPa]")
     t: float = Field(0.4, gt=0.0, le=20.0, description="thickness [mm]")
+    edge_tension: float = Field(
+        0.0, ge=0.0, le=100.0,
+        description="extra pull on the two free edges, outwards across the stretch, from the "
+        "pre-stretch on [N per mm of unstretched edge] (0: free edges)",
+    )
     rho: float = Field(1.2e-9, gt=0.0, description="density [t/mm^3] (inertial mode only)")
     margin_x: float = Field(
         20.0, ge=2.0, le=1e4, description="fabric beyond the rod ends along x, printed state [mm]"

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanics.assemble import Assembly, ElementGroup
-from ..mechanics.fabric import gravity, inertia
+from ..mechanics.fabric import dead_load, inertia
 from .linear import make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
 
@@ -55,7 +55,7 @@ def gravity_group(sim, free: np.ndarray) -> ElementGroup | None:
         return None
     nodes = np.nonzero(free)[0]
     w = lumped_masses(sim)[nodes, None] * np.asarray(grav.g, dtype=float)[None, :]
-    return ElementGroup("gravity", gravity, nodes[:, None], (w,))
+    return ElementGroup("gravity", dead_load, nodes[:, None], (w,))
 
 
 def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, progress):

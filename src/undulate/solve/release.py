@@ -32,6 +32,7 @@ import numpy as np
 from ..mechanics.assemble import Assembly, ElementGroup
 from ..mechanics.build import (
     RodSection,
+    edge_tension_group,
     fabric_groups,
     lateral_stretch,
     rod_centrelines,
@@ -102,6 +103,9 @@ def prepare(case: Case) -> Simulation:
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
     groups = fabric_groups(mesh, f.E, f.nu, f.t, E_y=f.E_y, G=f.G,
                            direction=case.release.direction)
+    pull = edge_tension_group(mesh, f.edge_tension, case.release.direction)
+    if pull is not None:  # part of the fabric's loads from the pre-stretch on
+        groups.append(pull)
     return Simulation(case, mesh, secs, X3, groups, force_scale=f.E * f.t * m.dx_rod)
 
 
