@@ -158,12 +158,8 @@ def rod_lines_from_segments(segments) -> list[RodLine | RodPath]:
 def _strip(ln: RodLine | RodPath, dx_rod: float, b: float
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centre nodes P and side rows Qp (+b/2 along the normal), Qm (printed), each (m, 2)."""
-    if isinstance(ln, RodLine):
-        P = ln.stations(dx_rod)
-        nrm = np.broadcast_to(ln.normal, P.shape)
-    else:
-        P = ln.stations(dx_rod)
-        nrm = RodPath.normals(P)
+    P = ln.stations(dx_rod)
+    nrm = np.broadcast_to(ln.normal, P.shape) if isinstance(ln, RodLine) else RodPath.normals(P)
     half = 0.5 * (ln.b if isinstance(ln, RodPath) and ln.b is not None else b)
     return P, P + half * nrm, P - half * nrm
 
@@ -286,10 +282,12 @@ def build_unstructured_mesh(
     strips = []  # (P, Qp, Qm) reference, each (m, 2)
     corners = []  # printed footprint rectangles (straight rods) or None
     widths = []
+    centres = []  # printed centre nodes
     for k, ln in enumerate(lines):
         P, Qp, Qm = _strip(ln, dx_rod, b)
         bk = float(np.linalg.norm(Qp[0] - Qm[0]))
         widths.append(bk)
+        centres.append(P)
         corners.append(np.array([Qm[0], Qm[-1], Qp[-1], Qp[0]])
                        if isinstance(ln, RodLine) else None)
         ref = to_ref(np.concatenate([Qp, Qm])) @ rot
@@ -307,8 +305,7 @@ def build_unstructured_mesh(
                 hit = _rects_overlap(corners[i], corners[j], tol_ij)
             else:
                 # rods along polylines: centre lines must stay (b_i + b_j) / 2 apart
-                d, _ = _centre_gap(_strip(lines[i], dx_rod, b)[0], _strip(lines[j], dx_rod, b)[0],
-                                   0.1 * min(widths[i], widths[j]))
+                d, _ = _centre_gap(centres[i], centres[j], 0.1 * min(widths[i], widths[j]))
                 hit = d < 0.5 * (widths[i] + widths[j]) + tol_ij
             if hit:
                 raise ValueError(

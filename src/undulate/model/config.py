@@ -497,7 +497,7 @@ class Case(_Strict):
         return self
 
     def _check_pattern(self) -> Case:
-        from .pattern import PatternError, check_lines, line_from_points
+        from .pattern import PatternError, _min_radius, check_lines, line_from_points
 
         r = self.rods
         given = [k for k in ("N", "s", "L", "segments") if k in r.model_fields_set]
@@ -526,8 +526,6 @@ class Case(_Strict):
             need = max(p.b, 3.0 * dx)
             st = RodPath(p.points).stations(dx)
             if len(st) >= 3:
-                from .pattern import _min_radius
-
                 rad = _min_radius(st)
                 if rad < need:
                     raise ValueError(
@@ -573,8 +571,9 @@ class Case(_Strict):
         from ..mesh import stretch_rotation
 
         rot = stretch_rotation(self.release.direction)
-        pts = [p.points @ rot for p in self.rod_paths()]  # in the stretch frame
-        bs = [p.b for p in self.rod_paths()]
+        paths = self.rod_paths()
+        pts = [p.points @ rot for p in paths]  # in the stretch frame
+        bs = [p.b for p in paths]
         lo = np.min([q.min(axis=0) - b / 2 for q, b in zip(pts, bs, strict=True)], axis=0)
         hi = np.max([q.max(axis=0) + b / 2 for q, b in zip(pts, bs, strict=True)], axis=0)
         if self.pattern is None and self.release.direction == 0.0:

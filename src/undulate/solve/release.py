@@ -247,11 +247,10 @@ def _affine_predictor(x: np.ndarray, e_old: float, e_new: float, on_rod: np.ndar
     """Fabric scaled along the stretch with the clamps; each rod moved rigidly with its
     centroid. ``rot``: stretch frame -> drawing frame (None: the same)."""
     x_pred = x.copy() if rot is None else x @ rot
-    x_s = x_pred.copy()
     scale = (1.0 + e_new) / (1.0 + e_old)
-    x_pred[~on_rod, 0] *= scale
+    x_pred[~on_rod, 0] *= scale  # rod nodes untouched: their centroids are read below
     for ch_nodes in rod_nodes:
-        xc = x_s[ch_nodes, 0].mean()
+        xc = x_pred[ch_nodes, 0].mean()
         x_pred[ch_nodes, 0] += xc * (scale - 1.0)
     return x_pred if rot is None else x_pred @ rot.T
 
