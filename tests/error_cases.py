@@ -70,6 +70,15 @@ def _tiny_to(out_setup: Callable[[Path], str], *extra: str) -> Callable[[Path], 
     return setup
 
 
+def _dxf_with_text(path: Path) -> None:
+    import ezdxf
+
+    doc = ezdxf.new()
+    doc.modelspace().add_line((0, 0), (60, 0))
+    doc.modelspace().add_text("label", dxfattribs={"layer": "NOTES"})
+    doc.saveas(path)
+
+
 def _out_is_file(d: Path) -> str:
     (d / "result").write_text("not a folder")
     return "result"
@@ -304,7 +313,36 @@ CASES: list[ErrorCase] = [
               "an arc and points in one line",
               _case_file('[[pattern.lines]]\npoints = [[0, 0], [30, 0]]\n'
                          'arc = { centre = [0, 0], radius = 20, start = 0, end = 90 }\n'),
-              ("pattern.lines.0: give exactly one of points (a polyline) or arc",)),
+              ("pattern.lines.0: give exactly one of points (a polyline), arc or spline",)),
+    ErrorCase("pattern-spline", _PAT,
+              "a spline through a repeated point",
+              _case_file('[[pattern.lines]]\nspline = [[0, 0], [10, 5], [10, 5], [30, 0]]\n'),
+              ("pattern.lines.0.spline: points 1 and 2 coincide",)),
+    ErrorCase("pattern-family", _PAT,
+              "a family with both `gaps` and `count`",
+              _case_file('[[pattern.families]]\nlength = 40.0\ncount = 3\nspacing = 4.0\n'
+                         'gaps = [4.0, 6.0]\n'),
+              ("pattern.families.0.gaps: give either gaps or count and spacing",)),
+    ErrorCase("pattern-family-lengths", _PAT,
+              "a family with a length list of the wrong size",
+              _case_file('[[pattern.families]]\nlength = [40.0, 30.0]\ngaps = [4.0, 6.0]\n'),
+              ("pattern.families.0.length: 2 lengths for 3 lines",)),
+    ErrorCase("pattern-outside", _PAT,
+              "a line outside the fabric (`fabric.size`)",
+              _case_file('[fabric]\nsize = [100.0, 60.0]\n[[pattern.lines]]\nid = "a"\n'
+                         'points = [[-60, 0], [20, 0]]\n'),
+              ("pattern: line a: leaves the fabric across the clamp on the left edge",)),
+    ErrorCase("pattern-clamp", _PAT,
+              "a line too close to a clamp",
+              _case_file('[fabric]\nsize = [100.0, 60.0]\n[[pattern.lines]]\nid = "a"\n'
+                         'points = [[-49, 0], [20, 0]]\n'),
+              ("pattern: line a: is only 0.5 mm from the clamp on the left edge",
+               "keep at least 2 mm")),
+    ErrorCase("pattern-dxf-text", _PAT,
+              "a DXF drawing with a text entity",
+              lambda d: (_dxf_with_text(d / "x.dxf")
+                         or ["run", "--pattern", "x.dxf", "--out", "out"]),
+              ("x.dxf: dxf: a TEXT entity", "layer NOTES) is not a line")),
     ErrorCase("pattern-rods", _PAT,
               "a pattern with `rods.N`",
               _case_file('[rods]\nN = 3\n[[pattern.lines]]\npoints = [[0, 0], [30, 0]]\n'),
@@ -318,6 +356,22 @@ CASES: list[ErrorCase] = [
               "`pattern.scale` without a file",
               _case_file('[pattern]\nscale = 2.0\n'),
               ("pattern.scale: only with pattern.file",)),
+    ErrorCase("clamps-right", "Boundary conditions (`release.clamps`, `[hang]`)",
+              "a frame without the right clamp",
+              _case_file('[release]\nclamps = ["left", "top"]\n'),
+              ("release.clamps: must hold 'right' (the stretch acts between left and right)",)),
+    ErrorCase("hang-none", "Boundary conditions (`release.clamps`, `[hang]`)",
+              "hanging by no edge",
+              _case_file('[hang]\nedges = []\n'),
+              ("hang.edges: List should have at least 1 item",)),
+    ErrorCase("hang-edge", "Boundary conditions (`release.clamps`, `[hang]`)",
+              "hanging by an edge that does not exist",
+              _case_file('[hang]\nedges = ["up"]\n'),
+              ("hang.edges.0: Input should be 'left', 'right', 'bottom' or 'top'",)),
+    ErrorCase("size-margins", "Boundary conditions (`release.clamps`, `[hang]`)",
+              "`fabric.size` together with a margin",
+              _case_file('[fabric]\nsize = [100.0, 60.0]\nmargin_y = 20.0\n'),
+              ("fabric.size: give either size or margin_y",)),
     # ---- gcode --------------------------------------------------------------------------
     ErrorCase("gcode-bed", "Print files (`undulate gcode`)", "a bed too small for the lines",
               lambda d: _gcode_args(d, "--bed-x", "15"), ("outside the 15 x 220 mm bed",)),

@@ -67,9 +67,15 @@ def test_dxf_lines_arcs_and_units(tmp_path: Path) -> None:
     msp.add_line((0, 0), (10, 0))
     msp.add_lwpolyline([(0, 2), (5, 2), (10, 3)])
     msp.add_arc((5, 10), radius=2, start_angle=0, end_angle=180)
+    msp.add_spline(fit_points=[(0, 20), (5, 22), (10, 20)])
     path = tmp_path / "p.dxf"
     doc.saveas(path)
     lines = read_dxf(path)
+    assert len(lines) == 4
+    # the spline through (0, 20), (5, 22), (10, 20) cm: a bow 20 mm high over its 100 mm
+    # chord (a parabola through those points would be 110.3 mm long)
+    assert 105.0 < lines[3].length < 112.0
+    assert np.ptp(lines[3].points[:, 1]) == pytest.approx(20.0, rel=0.05)
     assert [round(ln.length, 3) for ln in lines[:1]] == [100.0]
     assert lines[1].length == pytest.approx(50.0 + np.hypot(50.0, 10.0), rel=1e-9)
     assert lines[2].length == pytest.approx(np.pi * 20.0, rel=2e-3)
@@ -78,6 +84,13 @@ def test_dxf_lines_arcs_and_units(tmp_path: Path) -> None:
     closed.saveas(tmp_path / "c.dxf")
     with pytest.raises(PatternError, match="closed lwpolyline"):
         read_dxf(tmp_path / "c.dxf")
+    texted = ezdxf.new()
+    texted.modelspace().add_line((0, 0), (10, 0))
+    texted.modelspace().add_text("label", dxfattribs={"layer": "NOTES"})
+    texted.saveas(tmp_path / "t.dxf")
+    with pytest.raises(PatternError, match=r"dxf: a TEXT entity \(TEXT#\w+, layer NOTES\) is "
+                       "not a line"):
+        read_dxf(tmp_path / "t.dxf")
     with pytest.raises(PatternError, match="unknown kind .png"):
         read_pattern(tmp_path / "x.png")
 
@@ -122,3 +135,27 @@ def test_predict_lines_groups_by_relaxation_distance() -> None:
     assert [g["N"] for g in out["groups"]] in ([2, 1], [1, 2])
     fams = {ln["id"]: ln["family"] for ln in out["lines"]}
     assert fams["0"] == fams["1"] == "coherent" and fams["2"] == "single"
+
+
+def test_toml_splines_and_families() -> None:
+    """A spline passes through its points, sampled no coarser than the resolution; a family
+    lays parallel lines at the given (graded) spacing across its direction."""
+    from undulate.model import case_from_dict
+
+    through = [[-30.0, 0.0], [-10.0, 8.0], [10.0, -8.0], [30.0, 0.0]]
+    case = case_from_dict({"pattern": {"resolution": 0.4, "lines": [
+        {"id": "s", "spline": through}], "families": [
+        {"id": "f", "centre": [0.0, 30.0], "angle": 90.0, "length": [20.0, 30.0, 40.0],
+         "gaps": [3.0, 7.0]},
+        {"centre": [0.0, -40.0], "length": 50.0, "count": 3, "spacing": 4.0}]}})
+    s, *fam = case.rod_paths()
+    steps = np.linalg.norm(np.diff(s.points, axis=0), axis=1)
+    assert steps.max() <= 0.4 and steps.min() > 0.25
+    for p in through:  # the curve keeps every given point
+        assert np.min(np.linalg.norm(s.points - p, axis=1)) < 1e-9
+    assert [p.id for p in fam] == ["f0", "f1", "f2", "f1.0", "f1.1", "f1.2"]
+    # angle 90: lines along +y, laid out to their left (-x) at 0, 3 and 10 mm
+    assert [p.points[0, 0] for p in fam[:3]] == pytest.approx([0.0, -3.0, -10.0])
+    assert [p.length for p in fam[:3]] == pytest.approx([20.0, 30.0, 40.0])
+    assert [p.points[:, 1].mean() for p in fam[:3]] == pytest.approx([30.0] * 3)
+    assert [p.points[0, 1] for p in fam[3:]] == pytest.approx([-40.0, -36.0, -32.0])

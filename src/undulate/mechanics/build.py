@@ -146,19 +146,22 @@ def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float, *,
     return [membrane, bending]
 
 
-def edge_tension_group(mesh: FabricMesh, T: float, direction: float = 0.0
+def edge_tension_group(mesh: FabricMesh, T: float, direction: float = 0.0,
+                       edges: tuple[str, ...] | list[str] = ("bottom", "top")
                        ) -> ElementGroup | None:
-    """A pull of ``T`` [N per mm of unstretched edge] on the two free edges across the stretch
-    ("bottom" and "top"), outwards along the fabric's plane (a dead load: its direction does
-    not follow the edge); None for T = 0. Each edge node carries half of its two neighbouring
-    segments."""
-    if T == 0.0:
+    """A pull of ``T`` [N per mm of unstretched edge] on the free edges across the stretch
+    (``edges``, of "bottom" and "top"), outwards along the fabric's plane (a dead load: its
+    direction does not follow the edge); None for T = 0 or no edge. Each edge node carries
+    half of its two neighbouring segments."""
+    if T == 0.0 or not edges:
         return None
     from ..mesh import stretch_rotation
 
     rot = stretch_rotation(direction)
     nodes, forces = [], []
     for name, sign in (("bottom", -1.0), ("top", 1.0)):
+        if name not in edges:
+            continue
         idx = mesh.node_sets[name]
         seg = np.linalg.norm(np.diff(mesh.X[idx], axis=0), axis=1)
         share = np.zeros(len(idx))

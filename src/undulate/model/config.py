@@ -31,6 +31,7 @@ from pydantic import (
     Strict,
     StrictFloat,
     ValidationError,
+    field_validator,
     model_validator,
 )
 
@@ -40,11 +41,13 @@ __all__ = [
     "Segment",
     "Arc",
     "PatternLine",
+    "Family",
     "Pattern",
     "PrintedRod",
     "Release",
     "Imperfection",
     "Gravity",
+    "Hang",
     "MeshOptions",
     "SolverOptions",
     "Dynamics",
@@ -65,6 +68,8 @@ class _Strict(BaseModel):
 
 
 PosFloat = Annotated[float, Field(gt=0.0)]
+#: the fabric's four edges in the stretch frame: left/right are its ends along the stretch
+Edge = Literal["left", "right", "bottom", "top"]
 
 
 class Fabric(_Strict):
@@ -103,6 +108,24 @@ class Fabric(_Strict):
         200.0, ge=2.0, le=1e4,
         description="fabric beyond the outer rods along y, printed state [mm]",
     )
+    size: tuple[PosFloat, PosFloat] | None = Field(
+        None, strict=False,
+        description="a fabric of this size instead of margins: [along the stretch, across it] "
+        "in the printed (stretched) state, centred on the origin [mm]; every line must keep "
+        "2 mm of fabric to each edge",
+        json_schema_extra={"allowed": "two lengths > 0, each <= 1e5"},
+    )
+
+    @model_validator(mode="after")
+    def _size_or_margins(self) -> Fabric:
+        if self.size is not None:
+            given = [k for k in ("margin_x", "margin_y") if k in self.model_fields_set]
+            if given:
+                raise ValueError(f"size: give either size or {' and '.join(given)} (the "
+                                 "margins size the fabric around the lines)")
+            if max(self.size) > 1e5:
+                raise ValueError(f"size: each length must be <= 1e5 mm; got {self.size}")
+        return self
 
 
 class Segment(_Strict):
@@ -199,27 +222,151 @@ class Arc(_Strict):
                      self.centre[1] + self.radius * np.sin(th)]
 
 
+Point2 = Annotated[tuple[StrictFloat, StrictFloat], Strict(False)]
+
+
+def spline_points(through: np.ndarray, resolution: float) -> np.ndarray:
+    """(k, 2) points, at most ``resolution`` mm apart, on the smooth curve through the given
+    points: a natural cubic spline of each coordinate against the chord length."""
+    from scipy.interpolate import CubicSpline
+
+    d = np.linalg.norm(np.diff(through, axis=0), axis=1)
+    if np.any(d <= 0.0):
+        k = int(np.argmin(d))
+        raise ValueError(f"spline: points {k} and {k + 1} coincide")
+    t = np.r_[0.0, np.cumsum(d)]
+    if len(through) == 2:
+        f = np.linspace(0.0, 1.0, max(2, int(math.ceil(t[-1] / resolution)) + 1))
+        return through[0] + f[:, None] * (through[1] - through[0])
+    cs = CubicSpline(t, through, bc_type="natural")
+    out = [through[:1]]
+    for t0, t1 in zip(t[:-1], t[1:], strict=True):
+        # between two given points: samples equally spaced in arc length (the chord-length
+        # parameter is not quite that), so the curve keeps every given point
+        tf = np.linspace(t0, t1, 257)
+        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(cs(tf), axis=0), axis=1))]
+        k = max(1, int(math.ceil(arc[-1] / (0.99 * resolution))))
+        out.append(cs(np.interp(np.linspace(0.0, arc[-1], k + 1)[1:], arc, tf)))
+    return np.concatenate(out)
+
+
 class PatternLine(_Strict):
-    """One line of a pattern: a polyline `points` or an `arc`, optionally its own `h`, `b`.
+    """One line of a pattern: a polyline `points`, an `arc` or a `spline`, optionally its own
+    `h`, `b`.
 
     Lines without their own ``h`` or ``b`` take those of [rods]."""
 
     id: str | None = Field(None, min_length=1, max_length=100,
                            description="name of the line (default: its index)")
-    points: list[Annotated[tuple[StrictFloat, StrictFloat], Strict(False)]] | None = Field(
-        None, description="polyline [[x, y], ...] in the printed frame [mm]"
+    points: list[Point2] | None = Field(
+        None, description="polyline [[x, y], ...] in the printed frame [mm]",
+        json_schema_extra={"allowed": "two or more [x, y] points"},
     )
     arc: Arc | None = Field(None, description="a circular arc instead of points")
+    spline: list[Point2] | None = Field(
+        None, description="a smooth curve through these [[x, y], ...] instead of points "
+        "(natural cubic spline against chord length) [mm]",
+        json_schema_extra={"allowed": "two or more [x, y] points, no two in a row equal"},
+    )
     h: float | None = Field(None, gt=0.0, le=20.0, description="thickness of this line [mm]")
     b: float | None = Field(None, gt=0.0, le=50.0, description="width of this line [mm]")
 
     @model_validator(mode="after")
     def _one_shape(self) -> PatternLine:
-        if (self.points is None) == (self.arc is None):
-            raise ValueError("give exactly one of points (a polyline) or arc")
-        if self.points is not None and len(self.points) < 2:
-            raise ValueError("points: a line needs at least two [x, y] points")
+        if sum(v is not None for v in (self.points, self.arc, self.spline)) != 1:
+            raise ValueError("give exactly one of points (a polyline), arc or spline")
+        for name in ("points", "spline"):
+            v = getattr(self, name)
+            if v is not None and len(v) < 2:
+                raise ValueError(f"{name}: a line needs at least two [x, y] points")
+        if self.spline is not None:
+            pts = np.asarray(self.spline, dtype=float)
+            d = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+            if np.any(d <= 0.0):
+                k = int(np.argmin(d))
+                raise ValueError(f"spline: points {k} and {k + 1} coincide")
         return self
+
+    def polyline(self, resolution: float) -> np.ndarray:
+        """(k, 2) points of the line [mm] (arcs and splines sampled every ``resolution``)."""
+        if self.points is not None:
+            return np.asarray(self.points, dtype=float)
+        if self.arc is not None:
+            return self.arc.points(resolution)
+        return spline_points(np.asarray(self.spline, dtype=float), resolution)
+
+
+class Family(_Strict):
+    """Parallel straight lines side by side: equal or graded spacing, one length or a length
+    per line. Line k is centred at ``centre`` moved across the lines (to the left of
+    ``angle``) by the sum of the first k spacings."""
+
+    id: str | None = Field(None, min_length=1, max_length=100,
+                           description="prefix of the lines' names (lines <id>0, <id>1, ...; "
+                           "default f<index>.)")
+    centre: tuple[StrictFloat, StrictFloat] = Field(
+        (0.0, 0.0), strict=False, description="(x, y) centre of the first line [mm]")
+    angle: float = Field(0.0, ge=-180.0, le=180.0,
+                         description="direction of the lines, degrees from +x")
+    length: PosFloat | list[PosFloat] = Field(
+        description="length of every line, or one length per line [mm]",
+        json_schema_extra={"allowed": "> 0 (each)"})
+    count: int | None = Field(None, ge=1, le=1000,
+                              description="number of lines (with spacing)")
+    spacing: float | None = Field(None, gt=0.0, le=1e4,
+                                  description="centre-to-centre distance of the lines [mm]")
+    gaps: list[PosFloat] | None = Field(
+        None, description="centre-to-centre distances of consecutive lines, one fewer than "
+        "the lines (graded spacing; instead of count and spacing) [mm]",
+        json_schema_extra={"allowed": "each > 0"})
+    h: float | None = Field(None, gt=0.0, le=20.0, description="thickness of the lines [mm]")
+    b: float | None = Field(None, gt=0.0, le=50.0, description="width of the lines [mm]")
+
+    @field_validator("length", mode="before")
+    @classmethod
+    def _lengths(cls, v: Any) -> Any:
+        vals = v if isinstance(v, list) else [v]
+        ok = vals and all(isinstance(x, int | float) and not isinstance(x, bool)
+                          and math.isfinite(x) and x > 0 for x in vals)
+        if not ok:
+            raise ValueError(f"must be a length > 0 mm or a list of them, one per line; got {v!r}")
+        return [float(x) for x in v] if isinstance(v, list) else float(v)
+
+    @model_validator(mode="after")
+    def _layout(self) -> Family:
+        if self.gaps is not None:
+            if self.count is not None or self.spacing is not None:
+                raise ValueError("gaps: give either gaps or count and spacing, not both")
+            n = len(self.gaps) + 1
+        elif self.count is not None:
+            if self.count > 1 and self.spacing is None:
+                raise ValueError("spacing: count > 1 needs the spacing of the lines")
+            n = self.count
+        else:
+            raise ValueError("count: give count (and spacing) or gaps")
+        if isinstance(self.length, list) and len(self.length) != n:
+            raise ValueError(f"length: {len(self.length)} lengths for {n} lines")
+        return self
+
+    def offsets(self) -> np.ndarray:
+        """Distance of each line from the first, across the lines [mm]."""
+        if self.gaps is not None:
+            return np.r_[0.0, np.cumsum(self.gaps)]
+        return np.arange(self.count) * (self.spacing or 0.0)
+
+    def lines(self, index: int) -> list[tuple[str, np.ndarray]]:
+        """(id, 2 x 2 end points) of each line; ``index`` names the family by default."""
+        off = self.offsets()
+        lengths = (np.asarray(self.length, dtype=float) if isinstance(self.length, list)
+                   else np.full(len(off), float(self.length)))
+        a = math.radians(self.angle)
+        d = np.array([math.cos(a), math.sin(a)])
+        nrm = np.array([-d[1], d[0]])
+        c0 = np.asarray(self.centre, dtype=float)
+        prefix = self.id if self.id is not None else f"f{index}."
+        return [(f"{prefix}{k}", np.stack([c0 + o * nrm - 0.5 * ln * d,
+                                           c0 + o * nrm + 0.5 * ln * d]))
+                for k, (o, ln) in enumerate(zip(off, lengths, strict=True))]
 
 
 class Pattern(_Strict):
@@ -229,10 +376,16 @@ class Pattern(_Strict):
     lines of a drawing, ``scale`` multiplies its coordinates."""
 
     lines: list[PatternLine] = Field(
-        default_factory=list, description="the lines (at least one, with those of a file)"
+        default_factory=list, description="the lines (at least one, with those of a file "
+        "and the families)"
+    )
+    families: list[Family] = Field(
+        default_factory=list, description="families of parallel straight lines (after the "
+        "lines)"
     )
     resolution: float = Field(
-        0.5, gt=0.0, le=10.0, description="largest spacing of the points sampled on arcs [mm]"
+        0.5, gt=0.0, le=10.0,
+        description="largest spacing of the points sampled on arcs and splines [mm]"
     )
     min_gap: float = Field(
         0.0, ge=0.0, le=1e3,
@@ -313,11 +466,51 @@ class Release(_Strict):
 
 
 
+    clamps: list[Edge] = Field(
+        default_factory=lambda: ["left", "right"],
+        description="edges held by the frame during the pre-stretch and the release: 'left' "
+        "and 'right' (the ends along the stretch, which stretch it) and, if you add them, "
+        "'bottom' and/or 'top' (held straight at their printed position across the stretch, "
+        "moving with the stretch along it)",
+    )
+
+    @model_validator(mode="after")
+    def _frame(self) -> Release:
+        if len(set(self.clamps)) != len(self.clamps):
+            raise ValueError(f"clamps: each edge at most once; got {self.clamps}")
+        missing = [e for e in ("left", "right") if e not in self.clamps]
+        if missing:
+            raise ValueError(f"clamps: must hold {' and '.join(repr(m) for m in missing)} (the "
+                             f"stretch acts between left and right); got {self.clamps}")
+        return self
+
     @model_validator(mode="after")
     def _stop_below_start(self) -> Release:
         if self.final_strain >= self.eps0:
             raise ValueError(f"final_strain: must be below eps0 = {self.eps0:g} (the clamps "
                              f"move from eps0 down to it); got {self.final_strain:g}")
+        return self
+
+
+class Hang(_Strict):
+    """After the release: the fabric is taken off the clamps and held by some edges only, as
+    they are at the end of the release (e.g. hung up by its top edge under [gravity])."""
+
+    edges: list[Edge] = Field(
+        min_length=1, max_length=4,
+        description="edges that keep holding the fabric, where the release left them "
+        "(stretch frame: 'left'/'right' are the ends along the stretch, 'bottom'/'top' the "
+        "edges across it); the clamps of the others let go",
+    )
+    steps: int = Field(
+        10, ge=1, le=10000,
+        description="the let-go clamps' forces are taken down to zero in this many equal steps",
+    )
+
+    @model_validator(mode="after")
+    def _unique(self) -> Hang:
+        if len(set(self.edges)) != len(self.edges):
+            raise ValueError(f"edges: each edge at most once; got {self.edges}")
         return self
 
 
@@ -449,6 +642,10 @@ class Case(_Strict):
         None, description="lines of any direction and shape instead of [rods] N, s, L, "
         "segments (which must then be left out)"
     )
+    hang: Hang | None = Field(
+        None, description="after the release, hold the fabric by these edges only (default: "
+        "it stays in the clamps)"
+    )
 
     @model_validator(mode="after")
     def _knit(self) -> Case:
@@ -496,6 +693,38 @@ class Case(_Strict):
                     )
         return self
 
+    @model_validator(mode="after")
+    def _fits(self) -> Case:
+        """With ``fabric.size``: every line on the fabric, 2 mm clear of each edge."""
+        if self.fabric.size is None:
+            return self
+        from ..mesh import stretch_rotation
+
+        xmin, xmax, ymin, ymax = self.fabric_extent()
+        rot = stretch_rotation(self.release.direction)
+        clear = 2.0
+        for p in self.rod_paths():
+            q = p.points @ rot  # stretch frame
+            w = 0.5 * p.b
+            wx = 0.0 if self.pattern is None and self.release.direction == 0.0 else w
+            gaps = {"left": q[:, 0].min() - wx - xmin, "right": xmax - q[:, 0].max() - wx,
+                    "bottom": q[:, 1].min() - w - ymin, "top": ymax - q[:, 1].max() - w}
+            edge = min(gaps, key=gaps.get)
+            g = gaps[edge]
+            if g < clear:
+                where = ("leaves the fabric across" if g < 0 else
+                         f"is only {g:.3g} mm from")
+                held = ("the clamp on" if edge in self.release.clamps else "")
+                raise ValueError(
+                    f"pattern: line {p.id}: {where} {held} the {edge} edge of the "
+                    f"{xmax - xmin:g} x {ymax - ymin:g} mm fabric (fabric.size, stretch frame); "
+                    f"keep at least {clear:g} mm of fabric between a line's footprint and every "
+                    "edge".replace("  ", " ") if self.pattern is not None else
+                    f"fabric.size: rod {p.id} {where} {held} the {edge} edge of the "
+                    f"{xmax - xmin:g} x {ymax - ymin:g} mm fabric; keep at least {clear:g} mm "
+                    "of fabric between a rod's footprint and every edge".replace("  ", " "))
+        return self
+
     def _check_pattern(self) -> Case:
         from .pattern import PatternError, _min_radius, check_lines, line_from_points
 
@@ -506,7 +735,7 @@ class Case(_Strict):
                 f"pattern: rods.{', rods.'.join(given)} cannot be given together with a "
                 "pattern (its lines have their own geometry; [rods] sets h, b and the material)"
             )
-        if not self.pattern.lines:
+        if not self.pattern.lines and not self.pattern.families:
             raise ValueError("pattern: holds no lines")
         rods = self.rod_paths()
         dx = self.mesh.dx_rod
@@ -544,10 +773,13 @@ class Case(_Strict):
                                r.h, r.b) for k, (x0, y, length) in enumerate(self.segments())]
         out = []
         for k, ln in enumerate(self.pattern.lines):
-            pts = (np.asarray(ln.points, dtype=float) if ln.points is not None
-                   else ln.arc.points(self.pattern.resolution))
-            out.append(PrintedRod(ln.id or str(k), pts, ln.h if ln.h is not None else r.h,
+            out.append(PrintedRod(ln.id or str(k), ln.polyline(self.pattern.resolution),
+                                  ln.h if ln.h is not None else r.h,
                                   ln.b if ln.b is not None else r.b))
+        for j, fam in enumerate(self.pattern.families):
+            out.extend(PrintedRod(name, pts, fam.h if fam.h is not None else r.h,
+                                  fam.b if fam.b is not None else r.b)
+                       for name, pts in fam.lines(j))
         return out
 
     def segments(self) -> list[tuple[float, float, float]]:
@@ -580,6 +812,9 @@ class Case(_Strict):
             # rods along the stretch end exactly at their ends
             lo[0] = min(float(q[0, 0]) for q in pts)
             hi[0] = max(float(q[-1, 0]) for q in pts)
+        if self.fabric.size is not None:
+            a, c = self.fabric.size
+            return -0.5 * a, 0.5 * a, -0.5 * c, 0.5 * c
         xmin = float(lo[0]) - self.fabric.margin_x
         xmax = float(hi[0]) + self.fabric.margin_x
         ymin = float(lo[1]) - self.fabric.margin_y

@@ -202,8 +202,9 @@ def read_dxf(path: str | Path, *, scale: float = 1.0, resolution: float = 0.5,
              centre: bool = True) -> list[Line]:
     """Lines of a DXF drawing's model space: LINE, LWPOLYLINE, POLYLINE, ARC, SPLINE.
 
-    Units from ``$INSUNITS`` (unitless, mm, cm, m, inch, foot); closed polylines, circles
-    and ellipses are refused (not lines).
+    Units from ``$INSUNITS`` (unitless, mm, cm, m, inch, foot); closed polylines, circles,
+    ellipses and every other entity (text, blocks, hatches, ...) are refused, named, never
+    dropped.
     """
     import ezdxf
     from ezdxf import path as dxfpath
@@ -227,7 +228,10 @@ def read_dxf(path: str | Path, *, scale: float = 1.0, resolution: float = 0.5,
                                              and e.is_closed):
             raise PatternError(f"line {name}: a closed {kind.lower()} is not a line")
         if kind not in ("LINE", "LWPOLYLINE", "POLYLINE", "ARC", "SPLINE"):
-            continue
+            raise PatternError(
+                f"dxf: a {kind} entity ({name}, layer {e.dxf.get('layer', '0')}) is not a line "
+                "(only LINE, LWPOLYLINE, POLYLINE, ARC and SPLINE are); delete it from the "
+                "model space, or explode it into lines")
         p = dxfpath.make_path(e)
         pts = np.array([(v.x, v.y) for v in p.flattening(distance=resolution / (4 * f),
                                                          segments=4)], float) * f

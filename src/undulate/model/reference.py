@@ -57,6 +57,8 @@ def _base(ann: Any) -> Any:
 def _type_name(ann: Any) -> str:
     ann = _base(_strip_optional(ann))
     origin = typing.get_origin(ann)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in typing.get_args(ann))
     if origin is Literal:
         return "text"
     if origin is tuple:
@@ -89,7 +91,8 @@ def _default(f: FieldInfo) -> str:
     if f.is_required():
         return "required"
     if f.default_factory is not None:
-        return "(table)"
+        value = f.default_factory()
+        return "(table)" if isinstance(value, BaseModel) else f"`{_toml(value)}`"
     if f.default is PydanticUndefined:
         return "required"
     if f.default is None:
@@ -104,6 +107,10 @@ def _allowed(model: type[BaseModel], name: str, f: FieldInfo) -> str:
     ann = _base(_strip_optional(f.annotation))
     if typing.get_origin(ann) is Literal:
         return " / ".join(_toml(a) for a in typing.get_args(ann))
+    if typing.get_origin(ann) is list:
+        item = _base(typing.get_args(ann)[0])
+        if typing.get_origin(item) is Literal:
+            return "each of " + " / ".join(_toml(a) for a in typing.get_args(item))
     rng = config.allowed_range(model, name)
     if rng:
         return rng
@@ -127,9 +134,9 @@ def _allowed(model: type[BaseModel], name: str, f: FieldInfo) -> str:
 
 def _table(model: type[BaseModel], title: str, out: list[str], nested: list) -> None:
     out += [f"## {title}", ""]
-    doc = (model.__doc__ or "").strip().splitlines()
+    doc = (model.__doc__ or "").strip().split("\n\n")[0]  # the first paragraph
     if doc:
-        out += [doc[0], ""]
+        out += [" ".join(doc.split()), ""]
     out += ["| field | type | default | allowed | meaning |", "|---|---|---|---|---|"]
     for name, f in model.model_fields.items():
         ann = _strip_optional(f.annotation)

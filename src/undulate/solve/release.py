@@ -38,6 +38,7 @@ from ..mechanics.build import (
     rod_centrelines,
     rod_groups,
 )
+from ..mechanics.fabric import dead_load
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
 from .linear import make_solver
@@ -88,6 +89,8 @@ def prepare(case: Case) -> Simulation:
     f, r = case.fabric, case.rods
     eps0 = case.release.eps0
     lam_y = lateral_stretch(eps0, f.nu, orthotropic=f.E_y is not None)
+    if {"bottom", "top"} <= set(case.release.clamps):
+        lam_y = 1.0  # a frame holding all four edges: no lateral contraction
     m = case.mesh
     paths = case.rod_paths()
     if case.pattern is None:  # rods along x: the structured grid can take them too
@@ -103,24 +106,31 @@ def prepare(case: Case) -> Simulation:
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
     groups = fabric_groups(mesh, f.E, f.nu, f.t, E_y=f.E_y, G=f.G,
                            direction=case.release.direction)
-    pull = edge_tension_group(mesh, f.edge_tension, case.release.direction)
+    free_edges = [e for e in ("bottom", "top") if e not in case.release.clamps]
+    pull = edge_tension_group(mesh, f.edge_tension, case.release.direction, free_edges)
     if pull is not None:  # part of the fabric's loads from the pre-stretch on
         groups.append(pull)
     return Simulation(case, mesh, secs, X3, groups, force_scale=f.E * f.t * m.dx_rod)
 
 
-def _clamped(mesh: FabricMesh) -> np.ndarray:
-    clamp = np.zeros(mesh.n_nodes, dtype=bool)
-    clamp[mesh.left] = True
-    clamp[mesh.right] = True
-    return clamp
+def edge_nodes(mesh: FabricMesh, edges: list[str] | tuple[str, ...]) -> np.ndarray:
+    """Mask of the nodes on the named edges ("left", "right", "bottom", "top": stretch frame)."""
+    mask = np.zeros(mesh.n_nodes, dtype=bool)
+    for name in edges:
+        mask[mesh.node_sets[name]] = True
+    return mask
+
+
+def _clamped(sim: Simulation) -> np.ndarray:
+    """Nodes held by the frame during the pre-stretch and the release (``release.clamps``)."""
+    return edge_nodes(sim.mesh, sim.case.release.clamps)
 
 
 def clamp_positions(sim: Simulation, e: float, x: np.ndarray) -> np.ndarray:
     """Copy of ``x`` with the clamped edges at clamp strain ``e`` (stretch frame: x scaled,
     y and z at their reference values)."""
     out = x.copy()
-    clamp = _clamped(sim.mesh)
+    clamp = _clamped(sim)
     rot = sim.rotation
     u = sim.X3[clamp] @ rot  # reference, stretch frame
     u[:, 0] *= 1.0 + e
@@ -167,7 +177,7 @@ def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
     x = ((sim.X3 @ rot) * np.array([1.0 + eps0, 1.0, 0.0])) @ rot.T
     x = clamp_positions(sim, eps0, x)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
-    fixed[_clamped(sim.mesh)] = True
+    fixed[_clamped(sim)] = True
     fixed[:, 2] = True
     asm = Assembly(sim.mesh.n_nodes, sim.fabric, fixed)
     o = NewtonOptions(**{**opts.__dict__, "require_stable": True, "negative_curvature": False})
@@ -201,7 +211,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     x_print, pre = prestretch(sim, opts)
     rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
-    fixed[_clamped(sim.mesh)] = True
+    fixed[_clamped(sim)] = True
     from .dynamics import gravity_group
 
     weight = gravity_group(sim, ~fixed.all(axis=1))  # acts from the start of the release
@@ -220,6 +230,8 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
         x, history, stats = release_inertial(sim, asm, x, opts, progress)
     else:
         x, history, stats = _release_quasistatic(sim, asm, x, opts, progress)
+    if case.hang is not None:
+        asm, x = hang(sim, sim.fabric + rods, x, opts, history, stats, progress)
     stats.update(
         prestretch_iterations=pre["iterations"],
         setup_time_s=t_setup,
@@ -239,6 +251,66 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
             "fabric_membrane": asm.element_energies(x, "fabric_membrane"),
         },
     )
+
+
+def hang(sim: Simulation, groups: list[ElementGroup], x: np.ndarray, opts: NewtonOptions,
+         history: list[dict], stats: dict, progress: ProgressFn | None = None
+         ) -> tuple[Assembly, np.ndarray]:
+    """After the release: hold the fabric by ``case.hang.edges`` only (where they are now) and
+    let go of the other clamps gradually.
+
+    The force each let-go clamp exerts on its nodes at the end of the release becomes a dead
+    load, taken down to zero in ``hang.steps`` equal steps, each solved to a stable
+    equilibrium (so the sheet, e.g., swings down under its weight gradually instead of in one
+    jump). Appends one record per step to ``history`` (``stage = "hang"``) and the totals to
+    ``stats``; returns the final assembly (held edges fixed, weight on every other node) and
+    state."""
+    from .dynamics import gravity_group
+
+    hg = sim.case.hang
+    held = edge_nodes(sim.mesh, hg.edges)
+    let_go = _clamped(sim) & ~held
+    fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
+    fixed[held] = True
+    weight = gravity_group(sim, ~held)
+    base = groups + ([weight] if weight else [])
+    nodes = np.nonzero(let_go)[0]
+    # the clamps' forces on the let-go nodes: what keeps them in equilibrium now
+    final = Assembly(sim.mesh.n_nodes, base, fixed)
+    if nodes.size == 0:  # every clamp is among the held edges: nothing to let go
+        stats.update(hang_steps=0, hang_newton_iterations=0)
+        return final, x
+    w0 = final.gradient_full(x)[nodes]
+    clamp = ElementGroup("clamp_force", dead_load, nodes[:, None], (w0,))
+    asm = Assembly(sim.mesh.n_nodes, base + [clamp], fixed)
+    solver = make_solver(opts.linear_solver)
+    rng = np.random.default_rng(sim.case.imperfection.seed + 2)
+    last = history[-1] if history else {}
+    its = negs = 0
+    for k in range(1, hg.steps + 1):
+        clamp.set_params(w0 * (1.0 - k / hg.steps))
+        res = minimize(asm, x, asm.free(x), opts, solver=solver, rng=rng)
+        its += res.iterations
+        negs += res.negative_steps
+        if not res.converged:
+            raise ConvergenceError(
+                f"letting go of the clamps, step {k} of {hg.steps} (clamp forces at "
+                f"{1.0 - k / hg.steps:.3g} of their value): {res.message}",
+                step=len(history), residual=res.residual)
+        x = asm.full(res.u, x)
+        rec = dict(step=len(history), stage="hang", let_go=k / hg.steps,
+                   release_strain=last.get("release_strain"),
+                   clamp_strain=last.get("clamp_strain"), energy=res.energy,
+                   **_heights(sim, x), newton_iterations=res.iterations,
+                   negative_steps=res.negative_steps, residual=res.residual)
+        history.append(rec)
+        if progress is not None:
+            progress(1.0, rec)
+    stats["newton_iterations"] = stats.get("newton_iterations", 0) + its
+    stats["negative_curvature_steps"] = stats.get("negative_curvature_steps", 0) + negs
+    stats.update(hang_steps=hg.steps, hang_newton_iterations=its,
+                 final_residual=history[-1]["residual"])
+    return final, x  # energies are reported without the (now zero) clamp forces
 
 
 def _affine_predictor(x: np.ndarray, e_old: float, e_new: float, on_rod: np.ndarray,
