@@ -2,11 +2,13 @@
 
 1. **Pre-stretch.** The fabric (reference = unstretched mesh) is stretched along x by clamping
    its short edges at x = X (1 + eps0) (y and z held at their reference values, as in a frame);
-   the long edges are free. With ``release.direction`` the same happens in a frame turned by
-   that angle against the drawing's (x along the stretch). The in-plane equilibrium is
-   solved with z = 0 (the fabric is flat on the print bed).
-2. **Print.** Rod element groups are built from the pre-stretched positions, so the rods are
-   stress-free there.
+   the long edges are free unless ``release.clamps`` holds them too (straight, at their
+   printed y, moving with the stretch along x). With ``release.direction`` the same happens
+   in a frame turned by that angle against the drawing's (x along the stretch). The
+   in-plane equilibrium is solved with z = 0 (the fabric is flat on the print bed).
+2. **Print.** The groups of the energy terms that act from printing on
+   (:mod:`undulate.solve.terms`: the rods, the weight) are built from the pre-stretched
+   positions, so the rods are stress-free there.
 3. **Imperfection.** A smooth random out-of-plane displacement (RMS ``amplitude``, correlation
    length ``correlation``, from ``seed``) is added under the rods.
 4. **Release.** The clamp strain goes from eps0 to ``release.final_strain`` (0: all the
@@ -17,6 +19,8 @@
    Inertial: implicit damped dynamics
    (see :mod:`undulate.solve.dynamics`) with the clamps moving over ``release_time``, then
    ``settle_time`` of settling.
+5. **Hang** (``[hang]``, optional). The fabric is held by the chosen edges only, and the
+   other clamps' forces are taken down to zero in steps (:func:`hang`).
 
 Every step records the release strain, energy, max rod height, Newton iterations.
 """
@@ -32,17 +36,15 @@ import numpy as np
 from ..mechanics.assemble import Assembly, ElementGroup
 from ..mechanics.build import (
     RodSection,
-    edge_tension_group,
-    fabric_groups,
     lateral_stretch,
     rod_centrelines,
-    rod_groups,
 )
 from ..mechanics.fabric import dead_load
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
 from .linear import make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
+from .terms import TermState, groups
 
 __all__ = ["Simulation", "SimResult", "prepare", "run_release", "imperfection_field"]
 
@@ -73,7 +75,7 @@ class Simulation:
     mesh: FabricMesh
     sections: list[RodSection]  # one per rod
     X3: np.ndarray
-    fabric: list[ElementGroup]
+    fabric: list[ElementGroup]  # groups of the terms acting from the pre-stretch on (terms.py)
     force_scale: float
 
     @property
@@ -104,13 +106,9 @@ def prepare(case: Case) -> Simulation:
     )
     secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t) for p in paths]
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
-    groups = fabric_groups(mesh, f.E, f.nu, f.t, E_y=f.E_y, G=f.G,
-                           direction=case.release.direction)
-    free_edges = [e for e in ("bottom", "top") if e not in case.release.clamps]
-    pull = edge_tension_group(mesh, f.edge_tension, case.release.direction, free_edges)
-    if pull is not None:  # part of the fabric's loads from the pre-stretch on
-        groups.append(pull)
-    return Simulation(case, mesh, secs, X3, groups, force_scale=f.E * f.t * m.dx_rod)
+    sim = Simulation(case, mesh, secs, X3, [], force_scale=f.E * f.t * m.dx_rod)
+    sim.fabric = groups(sim, ("prestretch",))
+    return sim
 
 
 def edge_nodes(mesh: FabricMesh, edges: list[str] | tuple[str, ...]) -> np.ndarray:
@@ -209,13 +207,11 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
                          negative_curvature=so.negative_curvature,
                          linear_solver=so.linear_solver, modes=so.modes)
     x_print, pre = prestretch(sim, opts)
-    rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[_clamped(sim)] = True
-    from .dynamics import gravity_group
-
-    weight = gravity_group(sim, ~fixed.all(axis=1))  # acts from the start of the release
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods + ([weight] if weight else []), fixed)
+    # the rods, printed stress-free, and the weight, from the start of the release on
+    printed = groups(sim, ("print",), TermState(x_print, ~fixed.all(axis=1)))
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
     rng = np.random.default_rng(case.imperfection.seed)
     x = x_print.copy()
     imp = case.imperfection
@@ -231,7 +227,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     else:
         x, history, stats = _release_quasistatic(sim, asm, x, opts, progress)
     if case.hang is not None:
-        asm, x = hang(sim, sim.fabric + rods, x, opts, history, stats, progress)
+        asm, x = hang(sim, x_print, x, opts, history, stats, progress)
     stats.update(
         prestretch_iterations=pre["iterations"],
         setup_time_s=t_setup,
@@ -253,7 +249,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     )
 
 
-def hang(sim: Simulation, groups: list[ElementGroup], x: np.ndarray, opts: NewtonOptions,
+def hang(sim: Simulation, x_print: np.ndarray, x: np.ndarray, opts: NewtonOptions,
          history: list[dict], stats: dict, progress: ProgressFn | None = None
          ) -> tuple[Assembly, np.ndarray]:
     """After the release: hold the fabric by ``case.hang.edges`` only (where they are now) and
@@ -264,16 +260,13 @@ def hang(sim: Simulation, groups: list[ElementGroup], x: np.ndarray, opts: Newto
     equilibrium (so the sheet, e.g., swings down under its weight gradually instead of in one
     jump). Appends one record per step to ``history`` (``stage = "hang"``) and the totals to
     ``stats``; returns the final assembly (held edges fixed, weight on every other node) and
-    state."""
-    from .dynamics import gravity_group
-
+    state (its groups from :mod:`undulate.solve.terms`)."""
     hg = sim.case.hang
     held = edge_nodes(sim.mesh, hg.edges)
     let_go = _clamped(sim) & ~held
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[held] = True
-    weight = gravity_group(sim, ~held)
-    base = groups + ([weight] if weight else [])
+    base = sim.fabric + groups(sim, ("print",), TermState(x_print, ~held))
     nodes = np.nonzero(let_go)[0]
     # the clamps' forces on the let-go nodes: what keeps them in equilibrium now
     final = Assembly(sim.mesh.n_nodes, base, fixed)
