@@ -188,3 +188,27 @@ def test_gcode_from_an_svg_pattern(tmp_path) -> None:
     xy = [(float(w[1:]) for w in ln.split() if w[0] in "XY") for ln in text.splitlines()
           if ln.startswith("G1") and " E" in ln]
     assert len(xy) > 20  # the curve is printed as many short moves
+
+
+def test_relaxed_drawing_follows_the_law_the_frame_and_the_direction() -> None:
+    """The relaxed-frame lines undo the case's own pre-stretch: the orthotropic knit's lateral
+    stretch, none across in a four-edge frame, and the stretch along a turned direction."""
+    from undulate.fabrication import PrintLine
+    from undulate.fabrication.drawing import relaxed_lines
+    from undulate.mechanics.material import OrthotropicSVK
+    from undulate.solve.release import printed_lateral_stretch
+
+    line = [PrintLine(0, np.array([[-30.0, 5.0], [30.0, 5.0]]), 0.3, 1.0)]
+    knit = case_from_dict({"fabric": {"E_y": 0.2, "G": 0.08, "nu": 0.3}})
+    ly = printed_lateral_stretch(knit)
+    assert ly == pytest.approx(OrthotropicSVK(0.45, 0.2, 0.3, 0.08).lateral_stretch(0.5))
+    assert ly == pytest.approx(math.sqrt(1 - 0.3 * (1.5**2 - 1)))
+    (r,) = relaxed_lines(line, 0.5, 0.3, lam_y=ly)
+    assert r.points == pytest.approx(np.array([[-20.0, 5.0 / ly], [20.0, 5.0 / ly]]))
+    assert r.b == pytest.approx(1.0 / ly)
+    framed = case_from_dict({"release": {"clamps": ["left", "right", "bottom", "top"]}})
+    assert printed_lateral_stretch(framed) == 1.0
+    # stretch along y (direction 90): y shrinks by 1 + eps0, x by the lateral stretch
+    (t,) = relaxed_lines(line, 0.5, 0.3, lam_y=0.8, direction=90.0)
+    assert t.points == pytest.approx(np.array([[-37.5, 5.0 / 1.5], [37.5, 5.0 / 1.5]]))
+    assert t.b == pytest.approx(1.0 / 1.5)  # the line runs across the stretch

@@ -22,12 +22,29 @@ from .gcode import GcodeError, PrintLine, _offset
 
 __all__ = ["relaxed_lines", "write_drawing", "relaxed_path"]
 
-def relaxed_lines(lines: list[PrintLine], eps0: float, nu: float) -> list[PrintLine]:
-    """The lines mapped to the relaxed fabric (uniform pre-stretch, see the module text)."""
-    from ..mechanics.build import lateral_stretch
+def relaxed_lines(lines: list[PrintLine], eps0: float, nu: float, *,
+                  lam_y: float | None = None, direction: float = 0.0) -> list[PrintLine]:
+    """The lines mapped to the relaxed fabric (uniform pre-stretch, see the module text).
 
-    scale = np.array([1.0 / (1.0 + eps0), 1.0 / lateral_stretch(eps0, nu)])
-    return [PrintLine(ln.index, ln.points * scale, ln.h, ln.b * scale[1]) for ln in lines]
+    ``lam_y``: the printed sheet's stretch across the stretch (default: the neo-Hookean
+    knit's free value for ``nu``; a case's own, orthotropic or framed, from
+    :func:`undulate.solve.release.printed_lateral_stretch`); ``direction``: of the stretch,
+    degrees from the drawing's x axis. A line's width is scaled by the stretch across it
+    along its own normal (exactly for lines along the stretch, approximately for others)."""
+    from ..mechanics.build import lateral_stretch
+    from ..mesh import stretch_rotation
+
+    ly = lateral_stretch(eps0, nu) if lam_y is None else lam_y
+    rot = stretch_rotation(direction)  # stretch frame -> drawing frame
+    inv = rot @ np.diag([1.0 / (1.0 + eps0), 1.0 / ly]) @ rot.T  # printed -> relaxed
+    out = []
+    for ln in lines:
+        d = ln.points[-1] - ln.points[0]
+        chord = float(np.hypot(*d))
+        across = (float(np.linalg.norm(inv @ np.array([-d[1], d[0]]))) / chord
+                  if chord > 1e-12 else 1.0 / ly)
+        out.append(PrintLine(ln.index, ln.points @ inv.T, ln.h, ln.b * across))
+    return out
 
 
 def relaxed_path(path: str | Path) -> Path:
@@ -80,7 +97,8 @@ def _dxf(lines: list[PrintLine], path: Path, title: str) -> None:
 
 
 def write_drawing(lines: list[PrintLine], path: str | Path, *, eps0: float, nu: float,
-                  name: str = "case") -> list[Path]:
+                  name: str = "case", lam_y: float | None = None, direction: float = 0.0
+                  ) -> list[Path]:
     """Write the print-frame drawing to ``path`` (.svg or .dxf) and the relaxed-frame one to
     :func:`relaxed_path` of it; return both paths."""
     p = Path(path)
@@ -89,7 +107,9 @@ def write_drawing(lines: list[PrintLine], path: str | Path, *, eps0: float, nu: 
         raise GcodeError(f"--drawing {p}: must end in .svg or .dxf")
     written = []
     for frame, lns, target in (("print", lines, p),
-                               ("relaxed", relaxed_lines(lines, eps0, nu), relaxed_path(p))):
+                               ("relaxed", relaxed_lines(lines, eps0, nu, lam_y=lam_y,
+                                                       direction=direction),
+                                relaxed_path(p))):
         title = (f"{name}: lines in the {frame} frame ("
                  + ("fabric stretched by eps0 = " if frame == "print" else
                     "fabric relaxed from eps0 = ") + f"{eps0:g}), mm")

@@ -69,8 +69,11 @@ def gcode(
             line = (str(err).splitlines() or ["invalid case"])[0]
             raise _fail(line if line.startswith(str(config)) else f"{config}: {line}") from None
         lines = lines_of_case(case)
+        from ..solve.release import printed_lateral_stretch
+
         name, e0, ft, nu = case.name, case.release.eps0, case.fabric.t, case.fabric.nu
         extent = case.fabric_extent()
+        lam_y, direction = printed_lateral_stretch(case), case.release.direction
     else:
         from ..fabrication import PrintLine
         from ..model.pattern import PatternError, check_lines, read_pattern
@@ -90,6 +93,7 @@ def gcode(
                  for k, ln in enumerate(drawn_lines)]
         name, e0, ft, nu = pattern.stem, eps0, t, Fabric().nu
         extent = None
+        lam_y, direction = None, 0.0
     if (origin_x is None) != (origin_y is None):
         raise _fail("--origin-x, --origin-y: give both or neither")
     st = PrintSettings(bed_x=bed_x, bed_y=bed_y, nozzle=nozzle, filament=filament,
@@ -109,13 +113,16 @@ def gcode(
         if preview is not None:
             preview_png(plan, preview, title=f"{name}: toolpaths on the bed")
         if drawing is not None:
-            drawn = write_drawing(lines, drawing, eps0=e0, nu=nu, name=name)
+            drawn = write_drawing(lines, drawing, eps0=e0, nu=nu, name=name, lam_y=lam_y,
+                                  direction=direction)
     except OSError as err:
         raise _fail(f"cannot write {err.filename or out} ({err.strerror or err})") from None
     n_print = sum(m.kind == "print" for m in plan.moves)
     typer.echo(f"wrote {out}: {len(lines)} line(s), {plan.layers} layer(s) of "
                f"{plan.layer_height:.4g} mm, {n_print} printed moves; stretch the fabric by "
-               f"eps0 = {e0:g} along X before printing"
+               f"eps0 = {e0:g} along "
+               + ("X" if direction == 0.0 else f"{direction:g} degrees from X")
+               + " before printing"
                + (f"; preview {preview}" if preview else "")
                + (f"; drawings {', '.join(map(str, drawn))}" if drawn else ""))
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.optimize import brentq
 
 from ..mesh import FabricMesh, RodChain
 from .assemble import ElementGroup
@@ -19,10 +18,8 @@ from .compiled import CachedJit
 from .fabric import (
     dead_load,
     hinge_bending,
-    neo_hookean_membrane,
-    orthotropic_membrane,
-    orthotropic_stiffness,
 )
+from .material import FabricLaw, NeoHookean, OrthotropicSVK, fabric_law, lame_plane_stress
 from .rod import (
     edge_length,
     node_strains,
@@ -78,33 +75,32 @@ class RodSection:
         return self.E_B / (2.0 * (1.0 + self.nu_B)) * torsion_constant(self.b, self.h)
 
 
-def lame_plane_stress(E: float, nu: float) -> tuple[float, float]:
-    """(mu, lam2): shear modulus and plane-stress Lame constant E nu / (1 - nu^2)."""
-    return E / (2.0 * (1.0 + nu)), E * nu / (1.0 - nu**2)
-
-
 def lateral_stretch(eps0: float, nu: float, *, orthotropic: bool = False) -> float:
     """Lateral stretch lam_y of the membrane law under free uniaxial stretch 1 + eps0 (along
-    a material axis for the orthotropic law: lam_y^2 = 1 - nu ((1 + eps0)^2 - 1), from
-    S_yy = 0 with Green strains)."""
-    if orthotropic:
-        return float(np.sqrt(1.0 - nu * ((1.0 + eps0) ** 2 - 1.0)))
-    mu, lam2 = lame_plane_stress(1.0, nu)
-    lx = 1.0 + eps0
-    if lam2 == 0.0:
-        return 1.0
-    return float(brentq(lambda ly: mu * (ly**2 - 1.0) + lam2 * np.log(lx * ly), 1e-3, 1.0))
+    a material axis for the orthotropic law; :meth:`FabricLaw.lateral_stretch`: it does not
+    depend on the moduli)."""
+    law = OrthotropicSVK(1.0, 1.0, nu, 1.0) if orthotropic else NeoHookean(1.0, nu)
+    return law.lateral_stretch(eps0)
 
 
-def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float, *,
-                  E_y: float | None = None, G: float | None = None,
+def fabric_groups(mesh: FabricMesh, E: float | FabricLaw, nu: float | None = None,
+                  t: float = 0.4, *, E_y: float | None = None, G: float | None = None,
                   direction: float = 0.0) -> list[ElementGroup]:
     """Membrane (per triangle) and bending (per interior edge) groups of the fabric.
 
-    Isotropic neo-Hookean (E, nu), or with ``E_y`` and ``G`` an orthotropic knit: E along the
-    stretch (at ``direction`` degrees in the mesh's frame), E_y across it, nu the contraction
-    across under a pull along, G the in-plane shear modulus; its bending stiffness uses
-    sqrt(E E_y)."""
+    ``E``: a :class:`~undulate.mechanics.material.FabricLaw`, or the scalars of
+    :func:`~undulate.mechanics.material.fabric_law` (E, nu and, for an orthotropic knit,
+    ``E_y`` and ``G``: E along the stretch, at ``direction`` degrees in the mesh's frame). The
+    hinges' bending stiffness uses the law's bending modulus (sqrt(E E_y) for the knit)."""
+    from ..mesh import stretch_rotation
+
+    if isinstance(E, int | float):
+        if nu is None:
+            raise ValueError("fabric_groups: nu is needed with a modulus E")
+        law = fabric_law(float(E), nu, E_y, G)
+    else:
+        law = E
+    nu = law.nu
     X = mesh.X
     tri = mesh.tris
     D0 = X[tri[:, 1]] - X[tri[:, 0]]
@@ -113,28 +109,8 @@ def fabric_groups(mesh: FabricMesh, E: float, nu: float, t: float, *,
     det = Dm[:, 0, 0] * Dm[:, 1, 1] - Dm[:, 0, 1] * Dm[:, 1, 0]
     if np.any(det <= 0):
         raise ValueError("mesh: triangles must be counter-clockwise with positive area")
-    Dm_inv = np.linalg.inv(Dm)
-    A0 = 0.5 * det
-    n = tri.shape[0]
-    if E_y is None:
-        mu, lam2 = lame_plane_stress(E, nu)
-        membrane = ElementGroup(
-            "fabric_membrane",
-            neo_hookean_membrane,
-            tri,
-            (Dm_inv, A0, np.full(n, mu), np.full(n, lam2), np.full(n, t)),
-        )
-        E_bend = E
-    else:
-        if G is None:
-            raise ValueError("fabric: an orthotropic knit needs its shear modulus G")
-        from ..mesh import stretch_rotation
-
-        Q = np.tile(orthotropic_stiffness(E, E_y, nu, G), (n, 1))
-        R = np.tile(stretch_rotation(direction), (n, 1, 1))
-        membrane = ElementGroup("fabric_membrane", orthotropic_membrane, tri,
-                                (Dm_inv, A0, Q, R, np.full(n, t)))
-        E_bend = float(np.sqrt(E * E_y))
+    membrane = law.membrane(tri, np.linalg.inv(Dm), 0.5 * det, t, stretch_rotation(direction))
+    E_bend = law.bending_modulus
     hin = mesh.hinges()
     # areas of the two triangles at each hinge
     e_len2 = np.sum((X[hin[:, 1]] - X[hin[:, 0]]) ** 2, axis=1)

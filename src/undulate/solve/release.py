@@ -36,10 +36,10 @@ import numpy as np
 from ..mechanics.assemble import Assembly, ElementGroup
 from ..mechanics.build import (
     RodSection,
-    lateral_stretch,
     rod_centrelines,
 )
 from ..mechanics.fabric import dead_load
+from ..mechanics.material import FabricLaw, fabric_law
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
 from .linear import make_solver
@@ -79,6 +79,12 @@ class Simulation:
     force_scale: float
 
     @property
+    def law(self) -> FabricLaw:
+        """The fabric's material law (:mod:`undulate.mechanics.material`)."""
+        f = self.case.fabric
+        return fabric_law(f.E, f.nu, f.E_y, f.G)
+
+    @property
     def rotation(self) -> np.ndarray:
         """(3, 3) rotation from the stretch frame (x along the stretch) to the drawing frame."""
         rot = np.eye(3)
@@ -86,13 +92,21 @@ class Simulation:
         return rot
 
 
+def printed_lateral_stretch(case: Case) -> float:
+    """Stretch across the stretch lam_y of the homogeneous pre-stretched state that maps the
+    reference mesh onto the printed one: the law's free uniaxial value, or 1 when the frame
+    also holds the edges across the stretch (``release.clamps`` with bottom and top)."""
+    if {"bottom", "top"} <= set(case.release.clamps):
+        return 1.0
+    f = case.fabric
+    return fabric_law(f.E, f.nu, f.E_y, f.G).lateral_stretch(case.release.eps0)
+
+
 def prepare(case: Case) -> Simulation:
     """Mesh the case and build the fabric's element groups."""
     f, r = case.fabric, case.rods
     eps0 = case.release.eps0
-    lam_y = lateral_stretch(eps0, f.nu, orthotropic=f.E_y is not None)
-    if {"bottom", "top"} <= set(case.release.clamps):
-        lam_y = 1.0  # a frame holding all four edges: no lateral contraction
+    lam_y = printed_lateral_stretch(case)
     m = case.mesh
     paths = case.rod_paths()
     if case.pattern is None:  # rods along x: the structured grid can take them too

@@ -55,8 +55,7 @@ class EnergyTerm:
 
 
 def _fabric(sim: Simulation, state: TermState) -> list[ElementGroup]:
-    f = sim.case.fabric
-    return fabric_groups(sim.mesh, f.E, f.nu, f.t, E_y=f.E_y, G=f.G,
+    return fabric_groups(sim.mesh, sim.law, t=sim.case.fabric.t,
                          direction=sim.case.release.direction)
 
 
