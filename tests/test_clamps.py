@@ -20,7 +20,7 @@ SMALL = {"rods": {"L": 30.0, "h": 0.2}, "fabric": {"margin_x": 5.0, "margin_y": 
 def _case(**extra: dict) -> object:
     data = {k: dict(v) for k, v in SMALL.items()}
     for k, v in extra.items():
-        data[k] = {**data.get(k, {}), **v}
+        data[k] = {**data.get(k, {}), **v} if isinstance(v, dict) else v
     return case_from_dict(data)
 
 
@@ -29,6 +29,14 @@ def _case(**extra: dict) -> object:
     ({"release": {"clamps": ["left", "right", "left"]}}, r"each edge at most once"),
     ({"release": {"clamps": ["left", "right", "up"]}}, r"release.clamps.2: Input should be"),
     ({"hang": {"edges": []}}, r"hang.edges: List should have at least 1 item"),
+    ({"fabric": {"edge_tension": 0.1},
+      "release": {"clamps": ["left", "right", "bottom", "top"]}},
+     r"fabric.edge_tension: pulls on the edges across the stretch that are free"),
+    ({"pattern": {"families": [{"length": 1e6, "count": 1}]}},
+     r"pattern.families.0.length: must be a length > 0 and <= 1e5 mm"),
+    ({"pattern": {"lines": [{"id": "f0.0", "points": [[0.0, 5.0], [20.0, 5.0]]}],
+                  "families": [{"length": 20.0, "count": 1}]}},
+     r"pattern: line ids must be unique; repeated: \['f0.0'\] \(a family's lines"),
     ({"hang": {"edges": ["top"], "steps": 0}}, r"hang.steps: .*>= 1"),
     ({"fabric": {"size": [100.0, 50.0], "margin_y": 10.0}}, r"fabric.size: give either size"),
     ({"fabric": {"size": [100.0, 0.0]}}, r"fabric.size"),
@@ -65,6 +73,27 @@ def test_a_four_edge_frame_holds_the_edges_across_the_stretch() -> None:
     assert np.ptp(sim.X3[:, 1]) == pytest.approx(ymax - ymin)
 
 
+@pytest.mark.parametrize("edge", ["top", "bottom"])
+def test_one_held_edge_across_the_stretch_stays_at_its_printed_place(edge: str) -> None:
+    """With the frame holding one edge across the stretch, the sheet narrows towards it: that
+    edge is held at its printed place, the rod is printed where it was drawn (within the
+    non-uniform stretch near the clamps), and the free edge has come in."""
+    # a sheet long against its width (60 mm beyond the rod's ends, 31 mm wide): next to the
+    # clamps, which hold its ends unnarrowed, the lines sit off their drawn place (measured:
+    # 1.6 mm with 5 mm beyond the ends, 0.4 mm with 30, 0.05 mm with 60)
+    case = _case(release={"clamps": ["left", "right", edge]}, fabric={"margin_x": 60.0})
+    sim = prepare(case)
+    x, _ = prestretch(sim, NewtonOptions(force_scale=sim.force_scale))
+    ymin, ymax = case.fabric_extent()[2:]
+    held, free = (ymax, ymin) if edge == "top" else (ymin, ymax)
+    assert np.allclose(x[sim.mesh.node_sets[edge], 1], held)
+    rod = sim.mesh.rods[0].p
+    assert np.abs(x[rod, 1]).max() < 0.15  # drawn at y = 0
+    other = sim.mesh.node_sets["bottom" if edge == "top" else "top"]
+    mid = other[np.abs(x[other, 0]) < 5.0]
+    assert np.abs(x[mid, 1] - free).max() < 0.2  # the free edge in the middle came in
+
+
 def test_hung_up_by_its_top_edge_the_top_carries_the_whole_weight() -> None:
     """Released between left and right clamps, then let go of them and held by the top edge
     only, under a strong in-plane gravity: the held edge's force on the sheet balances the
@@ -93,6 +122,34 @@ def test_hung_up_by_its_top_edge_the_top_carries_the_whole_weight() -> None:
     # with the clamps gone the sides hang free: the bottom edge has moved down
     bottom = sim.mesh.node_sets["bottom"]
     assert res.x_final[bottom, 1].mean() < res.x_printed[bottom, 1].mean()
+
+
+def test_letting_go_after_an_inertial_release_numbers_its_steps_on() -> None:
+    case = _case(mode="inertial", dynamics={"release_time": 0.06, "settle_time": 0.02,
+                                            "dt": 0.01},
+                 hang={"edges": ["top"], "steps": 2})
+    res = run_release(case)
+    steps = [h["step"] for h in res.history]
+    assert steps == sorted(set(steps))  # no step number twice
+    assert [h.get("stage") for h in res.history[-2:]] == ["hang", "hang"]
+
+
+def test_the_onset_of_buckling_is_read_from_the_release_only() -> None:
+    """A deflection reached while the clamps are let go is no onset of buckling."""
+    from types import SimpleNamespace
+
+    from undulate.api import onset
+
+    def rec(e: float, d: float, **kw: object) -> dict:
+        return dict(release_strain=e, max_deflection=d, rod_max_deflection=[d], **kw)
+
+    flat = [rec(0.1 * k, 1e-3) for k in range(6)]
+    hung = [rec(0.5, 5.0, stage="hang", negative_steps=3)]
+    res = SimpleNamespace(history=flat + hung, sections=[SimpleNamespace(h=0.3)],
+                          centerlines=[np.zeros((3, 3))])
+    got = onset(res)
+    assert got["onset_release_strain"] is None
+    assert got["onset_negative_curvature_release_strain"] is None
 
 
 def test_holding_the_clamped_edges_changes_nothing() -> None:

@@ -126,7 +126,7 @@ def onset(result: SimResult) -> dict[str, Any]:
     None if none did (a release in small steps can follow the imperfect branch smoothly).
     Resolution: the increments before the onset, eps0 / (steps x release.onset_substeps).
     """
-    hist = result.history
+    hist = [h for h in result.history if h.get("stage") != "hang"]  # the release only
     hs = [sk.h for sk in result.sections]
     strains = [h["release_strain"] for h in hist]
     unstable = next((h["release_strain"] for h in hist if h.get("negative_steps", 0) > 0), None)

@@ -50,6 +50,9 @@ def _settings() -> None:
 
 
 def _step_text(rec: dict, steps: int | None) -> str:
+    if rec.get("stage") == "hang":
+        return (f"letting go of the clamps: {100 * rec['let_go']:.0f} %, Newton "
+                f"{rec['newton_iterations']} iterations, max height {rec['max_height']:.2f} mm")
     k = rec.get("step", "?")
     of = f"/{steps}" if isinstance(k, int) and steps and k <= steps else ""
     return (f"release step {k}{of}: release strain {rec['release_strain']:.3f}, "

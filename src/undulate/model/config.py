@@ -91,8 +91,9 @@ class Fabric(_Strict):
     t: float = Field(0.4, gt=0.0, le=20.0, description="thickness [mm]")
     edge_tension: float = Field(
         0.0, ge=0.0, le=100.0,
-        description="extra pull on the two free edges, outwards across the stretch, from the "
-        "pre-stretch on [N per mm of unstretched edge] (0: free edges)",
+        description="extra pull on the edges across the stretch that the frame leaves free "
+        "(release.clamps), outwards, from the pre-stretch on [N per mm of unstretched edge] "
+        "(0: free edges)",
     )
     rho: float = Field(1.2e-9, gt=0.0, description="density [t/mm^3] (inertial mode only)")
     margin_x: float = Field(
@@ -310,7 +311,7 @@ class Family(_Strict):
                          description="direction of the lines, degrees from +x")
     length: PosFloat | list[PosFloat] = Field(
         description="length of every line, or one length per line [mm]",
-        json_schema_extra={"allowed": "> 0 (each)"})
+        json_schema_extra={"allowed": "> 0, <= 1e5 (each)"})
     count: int | None = Field(None, ge=1, le=1000,
                               description="number of lines (with spacing)")
     spacing: float | None = Field(None, gt=0.0, le=1e4,
@@ -327,9 +328,10 @@ class Family(_Strict):
     def _lengths(cls, v: Any) -> Any:
         vals = v if isinstance(v, list) else [v]
         ok = vals and all(isinstance(x, int | float) and not isinstance(x, bool)
-                          and math.isfinite(x) and x > 0 for x in vals)
+                          and math.isfinite(x) and 0 < x <= 1e5 for x in vals)
         if not ok:
-            raise ValueError(f"must be a length > 0 mm or a list of them, one per line; got {v!r}")
+            raise ValueError(f"must be a length > 0 and <= 1e5 mm, or a list of them, one per "
+                             f"line; got {v!r}")
         return [float(x) for x in v] if isinstance(v, list) else float(v)
 
     @model_validator(mode="after")
@@ -515,7 +517,8 @@ class Hang(_Strict):
 
 
 class Gravity(_Strict):
-    """A constant body force on fabric and rods during the release (off by default)."""
+    """A constant body force on fabric and rods from the start of the release on, also while
+    the fabric hangs ([hang]); off by default."""
 
     g: tuple[StrictFloat, StrictFloat, StrictFloat] = Field(
         (0.0, 0.0, 0.0), strict=False,
@@ -646,6 +649,13 @@ class Case(_Strict):
         None, description="after the release, hold the fabric by these edges only (default: "
         "it stays in the clamps)"
     )
+
+    @model_validator(mode="after")
+    def _pull_on_free_edges(self) -> Case:
+        if self.fabric.edge_tension > 0 and {"bottom", "top"} <= set(self.release.clamps):
+            raise ValueError("fabric.edge_tension: pulls on the edges across the stretch that "
+                             "are free, but release.clamps holds both bottom and top")
+        return self
 
     @model_validator(mode="after")
     def _knit(self) -> Case:

@@ -345,7 +345,8 @@ def check_lines(lines: list[Line], *, b: float = 1.0, min_gap: float = 0.0,
     ids = [ln.id for ln in lines]
     dup = {i for i in ids if ids.count(i) > 1}
     if dup:
-        raise PatternError(f"pattern: line ids must be unique; repeated: {sorted(dup)}")
+        raise PatternError(f"line ids must be unique; repeated: {sorted(dup)} (a family's "
+                           "lines are named <id>0, <id>1, ...: give the family another id)")
     for ln in lines:
         p = _self_intersection(ln)
         if p is not None:

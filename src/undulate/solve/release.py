@@ -95,7 +95,8 @@ class Simulation:
 def printed_lateral_stretch(case: Case) -> float:
     """Stretch across the stretch lam_y of the homogeneous pre-stretched state that maps the
     reference mesh onto the printed one: the law's free uniaxial value, or 1 when the frame
-    also holds the edges across the stretch (``release.clamps`` with bottom and top)."""
+    also holds both edges across the stretch (``release.clamps`` with bottom and top; with one
+    of them the sheet narrows towards it, see :func:`prepare`)."""
     if {"bottom", "top"} <= set(case.release.clamps):
         return 1.0
     f = case.fabric
@@ -119,6 +120,16 @@ def prepare(case: Case) -> Simulation:
         h_far=m.h_far, direction=case.release.direction,
     )
     secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t) for p in paths]
+    across = [e for e in ("bottom", "top") if e in case.release.clamps]
+    if len(across) == 1 and lam_y != 1.0:
+        # one edge across the stretch held (at its printed place): the homogeneous state
+        # narrows towards it, y_p = y_e + lam_y (Y - y_e), so the reference sheet is moved
+        # by y_e (1 - 1 / lam_y) across the stretch (a rigid shift of the reference)
+        y_e = case.fabric_extent()[2 if across[0] == "bottom" else 3]
+        shift = stretch_rotation(case.release.direction) @ np.array(
+            [0.0, y_e * (1.0 - 1.0 / lam_y)])
+        mesh = replace(mesh, X=mesh.X + shift,
+                       ys=None if mesh.ys is None else mesh.ys + shift[1])
     X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
     sim = Simulation(case, mesh, secs, X3, [], force_scale=f.E * f.t * m.dx_rod)
     sim.fabric = groups(sim, ("prestretch",))
@@ -293,6 +304,7 @@ def hang(sim: Simulation, x_print: np.ndarray, x: np.ndarray, opts: NewtonOption
     solver = make_solver(opts.linear_solver)
     rng = np.random.default_rng(sim.case.imperfection.seed + 2)
     last = history[-1] if history else {}
+    step0 = int(last.get("step", len(history) - 1)) + 1
     its = negs = 0
     for k in range(1, hg.steps + 1):
         clamp.set_params(w0 * (1.0 - k / hg.steps))
@@ -303,9 +315,9 @@ def hang(sim: Simulation, x_print: np.ndarray, x: np.ndarray, opts: NewtonOption
             raise ConvergenceError(
                 f"letting go of the clamps, step {k} of {hg.steps} (clamp forces at "
                 f"{1.0 - k / hg.steps:.3g} of their value): {res.message}",
-                step=len(history), residual=res.residual)
+                step=step0 + k - 1, residual=res.residual)
         x = asm.full(res.u, x)
-        rec = dict(step=len(history), stage="hang", let_go=k / hg.steps,
+        rec = dict(step=step0 + k - 1, stage="hang", let_go=k / hg.steps,
                    release_strain=last.get("release_strain"),
                    clamp_strain=last.get("clamp_strain"), energy=res.energy,
                    **_heights(sim, x), newton_iterations=res.iterations,
