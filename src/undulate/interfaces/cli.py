@@ -49,13 +49,15 @@ def _settings() -> None:
         raise _fail(str(err)) from None
 
 
-def _step_text(rec: dict, steps: int | None) -> str:
+def _step_text(rec: dict, total: float | None) -> str:
+    """One release record as text; ``total``: the release strain at the end (eps0 minus
+    release.final_strain), so that a run whose steps grew does not look cut short."""
     if rec.get("stage") == "hang":
         return (f"letting go of the clamps: {100 * rec['let_go']:.0f} %, Newton "
                 f"{rec['newton_iterations']} iterations, max height {rec['max_height']:.2f} mm")
     k = rec.get("step", "?")
-    of = f"/{steps}" if isinstance(k, int) and steps and k <= steps else ""
-    return (f"release step {k}{of}: release strain {rec['release_strain']:.3f}, "
+    of = f" of {total:.3f}" if total else ""
+    return (f"release step {k}: release strain {rec['release_strain']:.3f}{of}, "
             f"Newton {rec['newton_iterations']} iterations, max height {rec['max_height']:.2f} mm")
 
 
@@ -63,7 +65,7 @@ class _Reporter:
     """Stage and release-step progress: a labelled bar on a terminal, else one line each."""
 
     def __init__(self, case) -> None:
-        self.steps = case.release.steps if case.mode == "quasi-static" else None
+        self.total = case.release.eps0 - case.release.final_strain
         self.live = console.is_terminal
         self._prog: Progress | None = None
 
@@ -89,7 +91,7 @@ class _Reporter:
             print(text, flush=True)
 
     def progress(self, frac: float, rec: dict) -> None:
-        text = _step_text(rec, self.steps)
+        text = _step_text(rec, self.total)
         if self._prog is not None:
             self._prog.update(self._task, completed=frac, description=escape(text))
         else:
