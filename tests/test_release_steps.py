@@ -169,3 +169,20 @@ def test_partial_release_stops_the_clamps_at_final_strain():
 
     with pytest.raises(ConfigError, match=r"release.final_strain: must be below eps0 = 0.5"):
         case_from_dict(SMALL | {"release": SMALL["release"] | {"final_strain": 0.5}})
+
+
+def test_a_printed_imperfection_survives_the_first_equilibrium() -> None:
+    """imperfection.kind = "start" displaces flat, stress-free rods: the stable flat state at
+    eps0 takes it out. "printed" puts it in the rods' rest shape: it stays."""
+    from undulate.model import case_from_dict
+    from undulate.solve.release import run_release
+
+    base = {"rods": {"L": 40.0, "h": 0.2}, "fabric": {"margin_x": 5.0, "margin_y": 20.0},
+            "release": {"steps": 4, "final_strain": 0.45}, "mesh": {"h_far": 6.0}}
+    first = {}
+    for kind in ("start", "printed"):
+        res = run_release(case_from_dict({**base, "imperfection": {"amplitude": 0.01,
+                                                                    "kind": kind}}))
+        first[kind] = res.history[0]["max_deflection"]
+    assert first["start"] < 1e-6
+    assert 0.005 < first["printed"] < 0.05

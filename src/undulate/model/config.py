@@ -540,8 +540,16 @@ class Gravity(_Strict):
 
 
 class Imperfection(_Strict):
-    """Small random out-of-plane noise added to the rods after printing."""
+    """Small random out-of-plane noise on the rods: a displacement at the start of the release,
+    or part of the printed (stress-free) shape."""
 
+    kind: Literal["start", "printed"] = Field(
+        "start",
+        description="start: the noise displaces the flat, stress-free rods at the start of the "
+        "release (where the flat state is stable the first equilibrium takes it out again); "
+        "printed: the rods are printed with the noise in their shape, so it stays as a "
+        "geometric imperfection",
+    )
     amplitude: float = Field(1e-3, ge=0.0, le=10.0, description="RMS of the noise [mm]")
     seed: int = Field(0, ge=0, description="seed of the random generator")
     correlation: float = Field(

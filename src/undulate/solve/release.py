@@ -234,9 +234,6 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     x_print, pre = prestretch(sim, opts)
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[_clamped(sim)] = True
-    # the rods, printed stress-free, and the weight, from the start of the release on
-    printed = groups(sim, ("print",), TermState(x_print, ~fixed.all(axis=1)))
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
     rng = np.random.default_rng(case.imperfection.seed)
     x = x_print.copy()
     imp = case.imperfection
@@ -244,6 +241,11 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
         dz = imperfection_field(ch.n_nodes, case.mesh.dx_rod, imp.amplitude, imp.correlation, rng)
         for idx in (ch.p, ch.qp, ch.qm):
             x[idx, 2] += dz
+    # the rods, printed stress-free (flat, or with the noise in their shape), and the weight,
+    # from the start of the release on
+    rest = x if imp.kind == "printed" else x_print
+    printed = groups(sim, ("print",), TermState(rest, ~fixed.all(axis=1)))
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
     t_setup = time.perf_counter() - t_start
     if case.mode == "inertial":
         from .dynamics import release_inertial
@@ -252,7 +254,7 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     else:
         x, history, stats = _release_quasistatic(sim, asm, x, opts, progress)
     if case.hang is not None:
-        asm, x = hang(sim, x_print, x, opts, history, stats, progress)
+        asm, x = hang(sim, rest, x, opts, history, stats, progress)
     stats.update(
         prestretch_iterations=pre["iterations"],
         setup_time_s=t_setup,
@@ -274,11 +276,12 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     )
 
 
-def hang(sim: Simulation, x_print: np.ndarray, x: np.ndarray, opts: NewtonOptions,
+def hang(sim: Simulation, x_rest: np.ndarray, x: np.ndarray, opts: NewtonOptions,
          history: list[dict], stats: dict, progress: ProgressFn | None = None
          ) -> tuple[Assembly, np.ndarray]:
     """After the release: hold the fabric by ``case.hang.edges`` only (where they are now) and
-    let go of the other clamps gradually.
+    let go of the other clamps gradually (``x_rest``: the positions the rods were printed
+    at).
 
     The force each let-go clamp exerts on its nodes at the end of the release becomes a dead
     load, taken down to zero in ``hang.steps`` equal steps, each solved to a stable
@@ -291,7 +294,7 @@ def hang(sim: Simulation, x_print: np.ndarray, x: np.ndarray, opts: NewtonOption
     let_go = _clamped(sim) & ~held
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     fixed[held] = True
-    base = sim.fabric + groups(sim, ("print",), TermState(x_print, ~held))
+    base = sim.fabric + groups(sim, ("print",), TermState(x_rest, ~held))
     nodes = np.nonzero(let_go)[0]
     # the clamps' forces on the let-go nodes: what keeps them in equilibrium now
     final = Assembly(sim.mesh.n_nodes, base, fixed)
