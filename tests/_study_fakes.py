@@ -118,3 +118,10 @@ def threads_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str
     rec = metrics(case)
     rec["pardiso_threads_env"] = os.environ.get("UNDULATE_PARDISO_THREADS")
     return rec
+
+
+def pid_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, Any]:
+    """Records the id of the process that made the run."""
+    rec = metrics(case)
+    rec["pid"] = os.getpid()
+    return rec

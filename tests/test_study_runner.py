@@ -257,3 +257,26 @@ def test_report_counts_runs_per_engine_old_records_included() -> None:
                        "engine": [None, "abc123def456", "abc123def456"]})
     line = next(t for t in _cost_lines(df) if t.startswith("| engine"))
     assert "abc123def456: 2" in line and "(not recorded): 1" in line
+
+
+def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monkeypatch
+                                                            ) -> None:
+    """The engine (a runner by name) runs in worker processes even with -j 1, so a crash
+    cannot end the study, and each worker is replaced after RUNS_PER_WORKER runs (a process
+    that had compiled kernels for many sheets died in LLVM, out of memory)."""
+    import os
+
+    from undulate.study import runner
+
+    monkeypatch.setattr(runner, "RUNS_PER_WORKER", 2)
+    study = _small_study([0.2, 0.3, 0.4, 0.6, 0.7])
+    run_study(study, tmp_path / "a", run_fn="_study_fakes:pid_run", workers=1,
+              progress=False, artifacts=False)
+    recs = sorted(_records(tmp_path / "a").values(), key=lambda r: r["params"]["rods.h"])
+    pids = [r["record"]["pid"] for r in recs]
+    assert os.getpid() not in pids
+    assert len(set(pids)) == 3  # 2 + 2 + 1 runs
+    assert pids[0] == pids[1] != pids[2] == pids[3] != pids[4]
+    s = run_study(_small_study([0.3, 0.5, 0.7]), tmp_path / "b",
+                  run_fn="_study_fakes:crash_run", workers=1, progress=False, artifacts=False)
+    assert (s.ok, s.failed) == (2, 1)  # the study outlived the crash

@@ -47,6 +47,11 @@ __all__ = ["RunFn", "RunSummary", "run_study", "execute_run", "resolve_runner", 
 RunFn = Callable[..., dict]
 RUNNER_ENV = "UNDULATE_STUDY_RUNNER"
 _MAX_CRASHES = 2  # a run that kills its worker this many times, alone, is recorded as failed
+#: runs a pool worker makes before it is replaced by a fresh process: JAX keeps every program
+#: compiled for every mesh a process has seen, and one study process that had made 16
+#: phase-diagram runs (sheets of different sizes) died in LLVM ("Cannot allocate memory",
+#: then a segfault; 2026-12-03). A fresh worker loads its kernels from the disk cache.
+RUNS_PER_WORKER = 8
 
 
 def resolve_runner(runner: RunFn | str | None) -> RunFn:
@@ -276,7 +281,10 @@ def run_study(
 ) -> RunSummary:
     """Run every run of ``study`` that has no record in ``out`` yet (plus failures if asked).
 
-    ``workers``: local worker processes (default ``os.cpu_count()``; 1 runs in-process).
+    ``workers``: local worker processes (default ``os.cpu_count()``), each replaced after
+    :data:`RUNS_PER_WORKER` runs. With 1, the engine (``run_fn`` None or a name) still runs
+    in one worker process, so that a crash cannot end the study; a function passed as
+    ``run_fn`` runs in this process.
     ``dask_address``: a dask.distributed scheduler address (or a ``Client``/``LocalCluster``
     object); runs are submitted as tasks, results come back to this process which writes them.
     ``artifacts``: pass ``DIR/artifacts/<id>`` as ``out`` to the run function, else None.
@@ -360,7 +368,11 @@ def run_study(
             _run_dask(todo, dask_address, run_fn, artifacts, artifact_dir, finish, bar)
         else:
             n = workers if workers is not None else (os.cpu_count() or 1)
-            if n <= 1 or len(todo) <= 1:
+            # runs of the engine (a runner given by name) go to worker processes even with
+            # one worker, so that a crash or a process grown large cannot end the study; a
+            # function passed in (tests, notebooks) runs here
+            isolate = not callable(run_fn) and len(todo) > 1
+            if (n <= 1 and not isolate) or len(todo) <= 1:
                 for r in todo:
                     bar.running = 1
                     bar.update()
@@ -417,7 +429,8 @@ def _run_pool(
 ) -> None:
     """Bounded submission to a process pool: at most ``workers`` runs in flight.
 
-    A worker that dies (a crash of the interpreter, not an exception: those are results)
+    Every ``RUNS_PER_WORKER x workers`` runs the pool is drained and replaced by fresh
+    processes. A worker that dies (a crash of the interpreter, not an exception: those are results)
     breaks the whole pool, and every run in flight then fails with it, so the culprit is not
     known. Those runs are retried one at a time in a fresh pool (a *suspect* never shares the
     pool with another run); a run that kills its worker alone ``_MAX_CRASHES`` times is
@@ -433,9 +446,12 @@ def _run_pool(
                                    mp_context=multiprocessing.get_context("spawn"))
         inflight: dict[Future, RunSpec] = {}
         broken = False
+        # the pool is replaced after RUNS_PER_WORKER runs per worker (drained first; not
+        # max_tasks_per_child, which can deadlock on Python 3.11-3.13: cpython gh-115634)
+        budget = RUNS_PER_WORKER * workers
         try:
             while queue or inflight:
-                while queue and len(inflight) < workers and not broken:
+                while queue and len(inflight) < workers and not broken and budget > 0:
                     alone = any(r.id in suspects for r in inflight.values())
                     if alone or (inflight and queue[-1].id in suspects):
                         break  # a suspect runs alone
@@ -447,6 +463,7 @@ def _run_pool(
                         broken = True
                         break
                     inflight[fut] = r
+                    budget -= 1
                 bar.running = len(inflight)
                 bar.update()
                 if not inflight:
@@ -476,8 +493,8 @@ def _run_pool(
             pool.shutdown(wait=False, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
-        if not broken:
-            break
+        if not broken and budget > 0:
+            break  # every run done (a spent budget goes round again with a fresh pool)
 
 
 def _crash_result(error: str, local: bool = True) -> dict[str, Any]:
