@@ -13,6 +13,7 @@ on layer ``LINES``) and its footprint outline (DXF layer ``FOOTPRINTS``). Units:
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from xml.sax.saxutils import escape
 
@@ -43,7 +44,7 @@ def relaxed_lines(lines: list[PrintLine], eps0: float, nu: float, *,
         chord = float(np.hypot(*d))
         across = (float(np.linalg.norm(inv @ np.array([-d[1], d[0]]))) / chord
                   if chord > 1e-12 else 1.0 / ly)
-        out.append(PrintLine(ln.index, ln.points @ inv.T, ln.h, ln.b * across))
+        out.append(PrintLine(ln.index, ln.points @ inv.T, ln.h, ln.b * across, ln.name))
     return out
 
 
@@ -74,7 +75,8 @@ def _svg(lines: list[PrintLine], title: str) -> str:
         # SVG's y grows downwards: flip so that the drawing reads like the case's (x, y)
         p = np.column_stack([ln.points[:, 0] - x0, y1 - ln.points[:, 1]])
         coords = " ".join(f"{a:.4f},{b:.4f}" for a, b in p)
-        out.append(f'<polyline id="line-{ln.index}" points="{coords}" '
+        ident = re.sub(r"[^A-Za-z0-9_.-]", "_", ln.label)
+        out.append(f'<polyline id="line-{ident}" points="{coords}" '
                    f'stroke-width="{ln.b:.4f}" data-h="{ln.h:g}" data-b="{ln.b:.4f}"/>')
     out += ["</g>", "</svg>", ""]
     return "\n".join(out)

@@ -43,6 +43,12 @@ class PrintLine:
     points: np.ndarray
     h: float
     b: float
+    name: str | None = None  # the line's id in the case or drawing (None: its index)
+
+    @property
+    def label(self) -> str:
+        """The name to show: the line's id, or its index."""
+        return self.name if self.name is not None else str(self.index)
 
     @property
     def length(self) -> float:
@@ -122,7 +128,7 @@ class Plan:
 def lines_of_case(case: Any) -> list[PrintLine]:
     """The case's rods as print lines (printed configuration, origin at the fabric centre):
     the rods along x, or every line of its pattern with its own h and b."""
-    return [PrintLine(k, p.points.astype(float), p.h, p.b)
+    return [PrintLine(k, p.points.astype(float), p.h, p.b, p.id)
             for k, p in enumerate(case.rod_paths())]
 
 
@@ -260,7 +266,7 @@ def make_gcode(lines: list[PrintLine], settings: PrintSettings | None = None, *,
     w(f"; {n_lines} line(s): h = {lines[0].h:g} mm as {n_layers} layer(s) of {zl:.4g} mm, "
       f"first layer {zl:.4g} mm above the fabric top at Z {z_fab:g}")
     for ln in lines:
-        w(f"; line {ln.index}: length {ln.length:.3f} mm, b = {ln.b:g} mm as "
+        w(f"; line {ln.index} ({ln.label}): length {ln.length:.3f} mm, b = {ln.b:g} mm as "
           f"{passes[ln.index]} pass(es) of {ln.b / passes[ln.index]:.4g} mm")
     w(f"; nozzle {st.nozzle:g} mm, filament {st.filament:g} mm, PLA defaults; "
       f"print {st.print_speed:g} mm/s, travel {st.travel_speed:g} mm/s")

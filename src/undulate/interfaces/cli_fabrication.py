@@ -89,7 +89,7 @@ def gcode(
             msg = str(err)
             raise _fail(f"{pattern}: {msg}" if isinstance(err, PatternError)
                         and str(pattern) not in msg else msg) from None
-        lines = [PrintLine(k, ln.points, ln.h or h, ln.b or b)
+        lines = [PrintLine(k, ln.points, ln.h or h, ln.b or b, ln.id)
                  for k, ln in enumerate(drawn_lines)]
         name, e0, ft, nu = pattern.stem, eps0, t, Fabric().nu
         extent = None
