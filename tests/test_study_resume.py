@@ -83,3 +83,38 @@ def test_sigkill_then_resume(tmp_path: Path) -> None:
     assert len(second) == len(set(second)) == N_RUNS - len(before)
     assert not set(second) & h_before
     assert set(second) | h_before == set(hs)
+
+
+def test_ctrl_c_stops_the_driver_and_its_workers(tmp_path: Path) -> None:
+    """SIGINT to the driver alone: it exits within seconds, and its workers with it (the
+    runs in flight are lost, to be made again on resume), instead of waiting for them."""
+    sweep = tmp_path / "SWEEP.toml"
+    sweep.write_text('[base]\n[base.rods]\nN = 1\n[sweep]\n"rods.h" = [0.2, 0.3, 0.4]\n')
+    out = tmp_path / "study"
+    env = _env(tmp_path / "log.txt", "int")
+    env["UNDULATE_FAKE_SLEEP"] = "60"
+    proc = subprocess.Popen(_cmd(sweep, out), env=env, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        time.sleep(4.0)  # the workers have started their first runs
+        assert proc.poll() is None, proc.stdout.read().decode()
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+        assert time.monotonic() - t0 < 15
+        assert proc.returncode != 0
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:  # the workers are gone too
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.1)
+        else:
+            raise AssertionError("worker processes outlived the interrupted driver")
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not scan_runs(out).records  # nothing finished, nothing half-written

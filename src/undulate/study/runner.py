@@ -490,6 +490,10 @@ def _run_pool(
                 if broken and not inflight:
                     break
         except BaseException:
+            # Ctrl-C (or any error here): the runs in flight are lost either way; stop their
+            # workers now, or the interpreter would wait for them at exit
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
             pool.shutdown(wait=False, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
