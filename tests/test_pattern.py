@@ -159,3 +159,18 @@ def test_toml_splines_and_families() -> None:
     assert [p.length for p in fam[:3]] == pytest.approx([20.0, 30.0, 40.0])
     assert [p.points[:, 1].mean() for p in fam[:3]] == pytest.approx([30.0] * 3)
     assert [p.points[0, 1] for p in fam[3:]] == pytest.approx([-40.0, -36.0, -32.0])
+
+
+def test_every_toml_example_of_the_patterns_doc_is_a_valid_case() -> None:
+    """The TOML blocks of docs/patterns.md, each on its own, pass the case checks."""
+    import re
+    import textwrap
+    import tomllib
+
+    from undulate.model import case_from_dict
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "patterns.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", doc, flags=re.S)
+    assert len(blocks) >= 4
+    for block in blocks:
+        case_from_dict(tomllib.loads(textwrap.dedent(block)))
