@@ -59,7 +59,7 @@ def test_load_case_file_errors(tmp_path):
 def test_examples_validate():
     from pathlib import Path
 
-    for p in sorted(Path(__file__).parents[1].joinpath("examples").glob("*.toml")):
+    for p in sorted(Path(__file__).parents[1].joinpath("examples").rglob("*.toml")):
         load_case(p)
 
 
