@@ -89,7 +89,15 @@ def fake_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, A
 
 def slow_run(case: Any, out: Path | None, artifacts: bool = True) -> dict[str, Any]:
     """Sleeps ``UNDULATE_FAKE_SLEEP`` s (default 0.25) and logs completions to
-    ``UNDULATE_FAKE_LOG`` as '<tag> <h>' lines (tag from ``UNDULATE_FAKE_TAG``)."""
+    ``UNDULATE_FAKE_LOG`` as '<tag> <h>' lines (tag from ``UNDULATE_FAKE_TAG``); with
+    ``UNDULATE_FAKE_STARTS`` set, first appends '<h>' to that file (the run has begun)."""
+    starts = os.environ.get("UNDULATE_FAKE_STARTS")
+    if starts:
+        fd = os.open(starts, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            os.write(fd, f"{case.rods.h!r}\n".encode())
+        finally:
+            os.close(fd)
     time.sleep(float(os.environ.get("UNDULATE_FAKE_SLEEP", "0.25")))
     rec = metrics(case)
     log = os.environ.get("UNDULATE_FAKE_LOG")

@@ -92,18 +92,23 @@ def test_ctrl_c_stops_the_driver_and_its_workers(tmp_path: Path) -> None:
     sweep.write_text('[base]\n[base.rods]\nN = 1\n[sweep]\n"rods.h" = [0.2, 0.3, 0.4]\n')
     out = tmp_path / "study"
     env = _env(tmp_path / "log.txt", "int")
-    env["UNDULATE_FAKE_SLEEP"] = "60"
+    starts = tmp_path / "starts.txt"
+    env.update(UNDULATE_FAKE_SLEEP="300", UNDULATE_FAKE_STARTS=str(starts))
     proc = subprocess.Popen(_cmd(sweep, out), env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
-        time.sleep(4.0)  # the workers have started their first runs
-        assert proc.poll() is None, proc.stdout.read().decode()
-        t0 = time.monotonic()
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # both workers have begun a (300 s) run
+            if starts.exists() and len(starts.read_text().split()) >= 2:
+                break
+            assert proc.poll() is None, proc.stdout.read().decode()
+            time.sleep(0.1)
+        else:
+            raise AssertionError("the workers did not start their runs")
         proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=20)
-        assert time.monotonic() - t0 < 15
+        proc.wait(timeout=90)  # long before the runs in flight would end
         assert proc.returncode != 0
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 30
         while time.monotonic() < deadline:  # the workers are gone too
             try:
                 os.killpg(proc.pid, 0)
