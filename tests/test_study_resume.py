@@ -94,7 +94,11 @@ def test_ctrl_c_stops_the_driver_and_its_workers(tmp_path: Path) -> None:
     env = _env(tmp_path / "log.txt", "int")
     starts = tmp_path / "starts.txt"
     env.update(UNDULATE_FAKE_SLEEP="300", UNDULATE_FAKE_STARTS=str(starts))
-    proc = subprocess.Popen(_cmd(sweep, out), env=env, start_new_session=True,
+    # Ctrl-C as in a terminal, also when the tests run in a background job (which starts
+    # its children with SIGINT ignored: the driver then slept through the signal, measured)
+    cmd = _cmd(sweep, out)
+    cmd[2] = "import signal; signal.signal(signal.SIGINT, signal.default_int_handler); " + CLI
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
         deadline = time.monotonic() + 120

@@ -84,7 +84,7 @@ def run_cmd(
         _fail(str(err))
     except KeyboardInterrupt:
         _err.print("interrupted: finished runs are saved; run the same command to resume")
-        raise typer.Exit(130) from None
+        _exit_now(130)
     _err.print(
         f"ran {summary.ran} ({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s;"
         f" skipped {summary.skipped_ok} done"
@@ -182,3 +182,20 @@ def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")
     if not (directory / "runs").is_dir():
         _fail(f"{directory}: not a study directory (no runs/)")
     _out.print(str(write_report(directory)), highlight=False, soft_wrap=True)
+
+
+def _exit_now(code: int) -> None:
+    """Stop this process and its worker processes at once. A normal exit would first wait for
+    the worker pool's threads, i.e. for the runs in flight (measured: an interrupted study
+    kept running until they ended); their results are lost either way, finished runs are
+    already on disk."""
+    import multiprocessing
+    import os
+    import sys
+
+    for child in multiprocessing.active_children():
+        child.terminate()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
