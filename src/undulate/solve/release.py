@@ -81,8 +81,7 @@ class Simulation:
     @property
     def law(self) -> FabricLaw:
         """The fabric's material law (:mod:`undulate.mechanics.material`)."""
-        f = self.case.fabric
-        return fabric_law(f.E, f.nu, f.E_y, f.G)
+        return case_law(self.case)
 
     @property
     def rotation(self) -> np.ndarray:
@@ -92,6 +91,12 @@ class Simulation:
         return rot
 
 
+def case_law(case: Case) -> FabricLaw:
+    """The material law of ``case.fabric`` (neo-Hookean, or orthotropic with E_y and G)."""
+    f = case.fabric
+    return fabric_law(f.E, f.nu, f.E_y, f.G)
+
+
 def printed_lateral_stretch(case: Case) -> float:
     """Stretch across the stretch lam_y of the homogeneous pre-stretched state that maps the
     reference mesh onto the printed one: the law's free uniaxial value, or 1 when the frame
@@ -99,8 +104,7 @@ def printed_lateral_stretch(case: Case) -> float:
     of them the sheet narrows towards it, see :func:`prepare`)."""
     if {"bottom", "top"} <= set(case.release.clamps):
         return 1.0
-    f = case.fabric
-    return fabric_law(f.E, f.nu, f.E_y, f.G).lateral_stretch(case.release.eps0)
+    return case_law(case).lateral_stretch(case.release.eps0)
 
 
 def prepare(case: Case) -> Simulation:
