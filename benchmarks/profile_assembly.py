@@ -17,10 +17,10 @@ import numpy as np
 
 from undulate import api
 from undulate.mechanics.assemble import Assembly
-from undulate.mechanics.build import rod_groups
 from undulate.solve.linear import make_solver
 from undulate.solve.newton import NewtonOptions
 from undulate.solve.release import _clamped, prepare, prestretch
+from undulate.solve.terms import TermState, groups
 
 
 def _mean(fn, n: int = 5) -> float:
@@ -34,10 +34,10 @@ def _mean(fn, n: int = 5) -> float:
 def main() -> None:
     sim = prepare(api.demo_case())
     x_print, _ = prestretch(sim, NewtonOptions(force_scale=sim.force_scale))
-    rods = rod_groups(sim.mesh.rods, x_print, sim.sections)
     fixed = np.zeros((sim.mesh.n_nodes, 3), bool)
-    fixed[_clamped(sim.mesh)] = True
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric + rods, fixed)
+    fixed[_clamped(sim)] = True
+    printed = groups(sim, ("print",), TermState(x_print, ~fixed.all(axis=1)))
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
     x = x_print.copy()
     x[:, 2] += 1e-3 * np.random.default_rng(0).standard_normal(len(x))
     print(f"nodes {sim.mesh.n_nodes}, unknowns {asm.n_free}, Hessian nnz (upper) {asm.nnz}")

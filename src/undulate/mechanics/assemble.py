@@ -42,6 +42,14 @@ __all__ = ["ElementGroup", "Assembly", "StrainForm", "StrainTerm", "strain_form"
            "strain_form_kernels"]
 
 
+#: element counts of kernel calls are padded to a multiple of this
+PAD_TO = 16
+
+
+def _round_up(n: int, m: int) -> int:
+    return -(-n // m) * m
+
+
 @dataclass
 class ElementGroup:
     """Elements sharing one energy function ``fn(x_local (k, 3), *params) -> scalar``."""
@@ -60,10 +68,12 @@ class ElementGroup:
                 raise ValueError(f"group {self.name}: parameter rows != number of elements")
 
         if self.chunk <= 0:
-            # a power of two just above the element count, capped: few distinct shapes to
-            # compile (cached on disk) and little padding for small groups such as rods
-            cap = 2048 if self.k <= 4 else 256
-            self.chunk = min(cap, max(16, 1 << max(self.n_el - 1, 1).bit_length()))
+            # one call over all the elements, padded to a multiple of PAD_TO, for groups up to
+            # a cap: the kernels are compiled per mesh anyway (the node array's shape is part
+            # of every kernel's signature), and each extra call shape costs a new process
+            # about half a second to load for the rod kernels (measured on the demo)
+            cap = 16384 if self.k <= 4 else 4096
+            self.chunk = min(cap, _round_up(max(self.n_el, 1), PAD_TO))
         self._pad()
 
     def set_params(self, *params: np.ndarray) -> None:
@@ -76,28 +86,17 @@ class ElementGroup:
 
     def _pieces(self) -> list[int]:
         """Sizes of the kernel calls over the elements: ``chunk`` as often as it fits, then the
-        remainder in falling powers of two down to ``chunk / 8`` (at least 16; the last one
-        padded).
+        remainder padded to a multiple of :data:`PAD_TO` (two call shapes at most).
 
-        Few distinct shapes to compile (cached on disk), and little padding: the demo's 3,298
-        membrane triangles ran as 2 x 2048 (24 % padding), now 2048 + 1024 + 256 (1 %). Used
-        only where it saves at least 5 % of the work; ``chunk``-sized calls otherwise.
+        The demo's 3,298 membrane triangles: one call of 3,312 (was 2,048 + 1,024 + 256, three
+        programs to load in every new process).
         """
         n, c = self.n_el, self.chunk
         sizes = [c] * (n // c)
         r = n - c * (n // c)
-        lo = min(c, max(c // 8, 16))
-        p = c // 2
-        while p >= lo:
-            if r >= p:
-                sizes.append(p)
-                r -= p
-            p //= 2
         if r > 0:
-            sizes.append(lo)
-        plain = [c] * -(-n // c)
-        # a split pays only where it saves work: extra calls and shapes to compile otherwise
-        return sizes if sum(sizes) <= 0.95 * sum(plain) else plain
+            sizes.append(min(c, _round_up(r, PAD_TO)))
+        return sizes
 
     def _pad(self) -> None:
         n = self.n_el
@@ -574,11 +573,15 @@ class Assembly:
         consistent ``k e(x)`` (mixed Newton). The gradient is always the exact one.
         """
         xj = jnp.asarray(x)
+        mixed = set(self.mixed_groups)
 
         def one(i: int) -> tuple[np.ndarray, np.ndarray]:
             g, keep = self.groups[i], self._keep[i]
-            if stress is not None and i in stress:
-                outs = g.run("grad_hess_mixed", xj, per_element=stress[i])
+            if i in mixed:
+                # the consistent pair is the mixed one at the stresses k e(x): one compiled
+                # program serves both (each costs a new process ~0.4 s to load for the rods)
+                s = stress[i] if stress is not None and i in stress else self._stress(i, xj)
+                outs = g.run("grad_hess_mixed", xj, per_element=s)
             else:
                 outs = g.run("grad_hess", xj)
             ge = np.concatenate([np.asarray(o[0]) for o in outs])[: g.n_el]
@@ -604,8 +607,14 @@ class Assembly:
     def stress(self, x: np.ndarray) -> dict[int, np.ndarray]:
         """Consistent element stresses ``k e(x)`` of the strain-form groups."""
         xj = jnp.asarray(x)
-        return {i: np.concatenate([np.asarray(o) for o in self.groups[i].run("stress", xj)])
-                [: self.groups[i].n_el] for i in self.mixed_groups}
+        return {i: self._stress(i, xj) for i in self.mixed_groups}
+
+    def _stress(self, i: int, xj: jnp.ndarray) -> np.ndarray:
+        # k (e + J 0) = k e through the linearized-stress kernel, which every mixed Newton
+        # iteration loads anyway (the same numbers as the "stress" kernel)
+        g = self.groups[i]
+        zero = jnp.zeros_like(xj)
+        return np.concatenate([np.asarray(o) for o in g.run("stress_lin", xj, zero)])[: g.n_el]
 
     def stress_linearized(self, x: np.ndarray, dx: np.ndarray) -> dict[int, np.ndarray]:
         """Stresses of the strains linearized at ``x`` and moved by ``dx``: ``k (e + J dx)``."""
