@@ -153,6 +153,12 @@ def test_chord_correction_takes_the_factored_step_only_when_it_lowers_the_energy
     np.testing.assert_array_equal(_chord_correction(q, uphill, x0), x0)
     broken = SimpleNamespace(solve=lambda r: np.full_like(r, np.nan))
     np.testing.assert_array_equal(_chord_correction(q, broken, x0), x0)
+    # with a stale stiffness (here the diagonal of A) each chord step gets closer: two do
+    # better than one, and a step that does not lower the energy ends the correction
+    stale = SimpleNamespace(solve=lambda r: r / np.diag(q.A))
+    e1 = q.energy(_chord_correction(q, stale, x0, steps=1))
+    e2 = q.energy(_chord_correction(q, stale, x0, steps=2))
+    assert e2 < e1 < q.energy(x0)
 
 
 def test_partial_release_stops_the_clamps_at_final_strain():
