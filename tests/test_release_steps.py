@@ -192,3 +192,22 @@ def test_a_printed_imperfection_survives_the_first_equilibrium() -> None:
         first[kind] = res.history[0]["max_deflection"]
     assert first["start"] < 1e-6
     assert 0.005 < first["printed"] < 0.05
+
+
+@pytest.mark.slow
+def test_grown_steps_end_where_fine_steps_do_for_a_thin_wide_rod():
+    """One 5 mm wide rod of h = 0.1 mm (the phase diagram's s = 0 column): the default release
+    (40 nominal steps growing up to 4 x) ends in the state of a release in 80 equal steps,
+    n = 7. Growth caps of 2 and 3 jump to another stable state (n = 5, lower energy) that the
+    fine release does not reach (docs/benchmarks.md, tenth pass); this guards the default."""
+    import numpy as np
+
+    base = {"name": "wide-thin", "rods": {"h": 0.1, "N": 1, "b": 5.0}}
+    fine = {**base, "release": {"steps": 80, "max_step_factor": 1.0}}
+    ns = []
+    for data in (base, fine):
+        r = api.simulate(case_from_dict(data))
+        rod = api.analyse(r)["rods"][0]
+        ns.append((rod["n"], rod["l"]))
+    assert ns[0][0] == ns[1][0] == 7
+    assert np.isclose(ns[0][1], ns[1][1], rtol=1e-3)
