@@ -60,7 +60,7 @@ class ElementGroup:
     fn: Callable[..., jnp.ndarray]
     nodes: np.ndarray  # (n_el, k) int
     params: tuple[np.ndarray, ...]  # each (n_el, ...)
-    chunk: int = 0  # elements per kernel call (0: chosen from k); fixed so jit compiles once
+    chunk: int = 0  # elements per kernel call (0: all of them, at most CALL_CAP); fixed shapes
 
     def __post_init__(self) -> None:
         self.nodes = np.asarray(self.nodes, dtype=np.int64)
