@@ -56,3 +56,63 @@ def test_batched_refuses_runs_of_another_mesh() -> None:
     b = Assembly(other.mesh.n_nodes, other.fabric, fixed)
     with pytest.raises(ValueError, match="run 1 has other nodes or clamps"):
         BatchedAssembly([a[0], b])
+
+
+# --------------------------------------------------------------------------- batched release
+RELEASE = {**SMALL, "release": {"steps": 10}}
+
+
+def _case(**rods: float):
+    return case_from_dict({**RELEASE, "rods": {**SMALL["rods"], **rods}})
+
+
+def test_batched_release_ends_in_the_single_run_states() -> None:
+    """Three thicknesses released together take the single-run engine's path: same Newton
+    iterations, same final positions (to roundoff), same n and l."""
+    from undulate import api
+    from undulate.solve.batch import release_batch
+
+    cases = [_case(h=h) for h in (0.2, 0.3, 0.5)]
+    stats: dict = {}
+    seen: set[int] = set()
+    batch = release_batch(cases, progress=lambda b, frac, rec: seen.add(b), stats=stats)
+    assert seen == {0, 1, 2}
+    # the runs met: far fewer rendezvous than the runs' evaluations added up
+    assert 0 < stats["rendezvous"] <= stats["batched_calls"]
+    energies = []
+    for case, res in zip(cases, batch, strict=True):
+        assert not isinstance(res, BaseException), res
+        one = api.simulate(case)
+        assert res.stats["newton_iterations"] == one.stats["newton_iterations"]
+        assert np.abs(res.x_final - one.x_final).max() <= 1e-8
+        ma, mb = api.analyse(one)["rods"][0], api.analyse(res)["rods"][0]
+        assert ma["n"] == mb["n"]
+        assert mb["l"] == pytest.approx(ma["l"], rel=1e-2)
+        energies.append(sum(res.energies.values()))
+    assert len({round(e, 6) for e in energies}) == 3  # three different runs, not one copied
+
+
+@pytest.mark.parametrize(("max_iter", "where"), [(2, "pre-stretch"), (4, "release step 1")])
+def test_batched_release_reports_each_runs_failure_and_finishes_the_others(
+        max_iter: int, where: str) -> None:
+    """A run that cannot converge (before it joins the batch: in the pre-stretch; or inside
+    the release) ends with its ConvergenceError (step, residual); the other runs of the batch
+    are not held up by it."""
+    from undulate.solve.batch import release_batch
+    from undulate.solve.newton import ConvergenceError
+
+    bad = case_from_dict({**RELEASE, "rods": {**SMALL["rods"], "h": 0.3},
+                          "release": {"steps": 1, "adaptive": False},
+                          "solver": {"max_iter": max_iter}})
+    res = release_batch([_case(h=0.3), bad])
+    assert not isinstance(res[0], BaseException)
+    assert isinstance(res[1], ConvergenceError)
+    assert str(res[1]).startswith(where)
+    assert res[1].step is not None and res[1].residual is not None
+
+
+def test_batched_release_refuses_runs_of_another_mesh() -> None:
+    from undulate.solve.batch import release_batch
+
+    res = release_batch([_case(h=0.3), _case(h=0.3, L=16.0)])
+    assert all(isinstance(r, ValueError) and "other nodes" in str(r) for r in res)

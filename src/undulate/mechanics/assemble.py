@@ -393,27 +393,44 @@ def strain_form(fn: Callable) -> StrainForm | None:
 
 
 _KERNEL_CACHE: dict[Callable, dict[str, Callable]] = {}
+_RAW_CACHE: dict[Callable, dict[str, Callable]] = {}
+#: kernels whose last argument is a global (n_nodes, 3) array gathered like the positions
+GATHER_LAST = ("stress_lin", "merit_step")
 
 
-def kernels_for(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
-    """Jitted kernels of one element energy (cached per function, shared by all assemblies).
+def gathered_kernels(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
+    """The kernels of one element energy as plain (not jitted) functions
+    ``kernel(x (n_nodes, 3), nodes (chunk, k), *params)``: what :func:`kernels_for` jits, and
+    what a batched evaluation maps over runs (:mod:`undulate.mechanics.batched`).
 
-    Each kernel is called as ``kernel(x (n_nodes, 3), nodes (chunk, k), *params)``. An energy
-    function may carry its own batched kernels (attribute ``kernels``, e.g. made by
+    An energy function may carry its own batched kernels (attribute ``kernels``, e.g. made by
     :func:`composite_kernels`); otherwise they are made by plain autodiff.
     """
-    if fn not in _KERNEL_CACHE:
+    if fn not in _RAW_CACHE:
         sf = strain_form(fn)
         custom = getattr(fn, "kernels", None)
         if sf is not None:
             batched = strain_form_kernels(sf)
         else:
             batched = custom() if callable(custom) else _group_kernels(fn)
+        _RAW_CACHE[fn] = {name: _gathered(k, name in GATHER_LAST)
+                          for name, k in batched.items()}
+    return _RAW_CACHE[fn]
+
+
+def kernels_for(fn: Callable[..., jnp.ndarray]) -> dict[str, Callable]:
+    """Jitted kernels of one element energy (cached per function, shared by all assemblies),
+    called as ``kernel(x (n_nodes, 3), nodes (chunk, k), *params)`` (:func:`gathered_kernels`).
+
+    Gathering the element's nodes inside the compiled function avoids one eager JAX gather
+    per chunk (about 1 ms each on CPU, measured), which dominated cheap kernels. Module-level
+    energies of undulate itself are also kept on disk as traced programs (:class:`CachedJit`).
+    """
+    if fn not in _KERNEL_CACHE:
         label = _disk_label(fn)
         _KERNEL_CACHE[fn] = {
-            name: _with_gather(k, gather_last=name in ("stress_lin", "merit_step"),
-                               label=f"{label}.{name}" if label else None)
-            for name, k in batched.items()
+            name: CachedJit(k, f"{label}.{name}") if label else jax.jit(k)
+            for name, k in gathered_kernels(fn).items()
         }
     return _KERNEL_CACHE[fn]
 
@@ -431,22 +448,16 @@ def _disk_label(fn: Callable) -> str | None:
     return f"{mod.removeprefix('undulate.')}.{qual}"
 
 
-def _with_gather(kernel: Callable, gather_last: bool = False, label: str | None = None
-                 ) -> Callable:
-    """Jit ``kernel(x[nodes], *params)`` as one call ``(x, nodes, *params)``.
-
-    Gathering the element's nodes inside the compiled function avoids one eager JAX gather
-    per chunk (about 1 ms each on CPU, measured), which dominated cheap kernels. With
-    ``gather_last`` the last argument is a global (n_nodes, 3) array gathered the same way.
-    With a ``label`` the traced program is also kept on disk (:class:`CachedJit`).
-    """
+def _gathered(kernel: Callable, gather_last: bool = False) -> Callable:
+    """``kernel(x[nodes], *params)`` as one function ``(x, nodes, *params)``; with
+    ``gather_last`` the last argument is a global (n_nodes, 3) array gathered the same way."""
 
     def gathered(x, nodes, *params):
         if gather_last:
             return kernel(x[nodes], *params[:-1], params[-1][nodes])
         return kernel(x[nodes], *params)
 
-    return CachedJit(gathered, label) if label else jax.jit(gathered)
+    return gathered
 
 
 @functools.cache
@@ -529,8 +540,13 @@ class Assembly:
         return np.asarray(x, dtype=np.float64).ravel()[self.free_dofs]
 
     # ------------------------------------------------------------------ evaluation
+    @staticmethod
+    def joined(g: ElementGroup, outs: Sequence) -> np.ndarray:
+        """One group's per-chunk kernel outputs as one array over its elements (padding off)."""
+        return np.concatenate([np.asarray(o) for o in outs])[: g.n_el]
+
     def _per_element(self, g: ElementGroup, xj: jnp.ndarray) -> np.ndarray:
-        return np.concatenate([np.asarray(o) for o in g.run("per_element", xj)])[: g.n_el]
+        return self.joined(g, g.run("per_element", xj))
 
     def energy(self, x: np.ndarray) -> float:
         xj = jnp.asarray(x)
@@ -558,9 +574,12 @@ class Assembly:
     def gradient_full(self, x: np.ndarray) -> np.ndarray:
         """Gradient with respect to all node coordinates, (n_nodes, 3)."""
         xj = jnp.asarray(x)
+        return self.gradient_from([self.joined(g, g.run("grad", xj)) for g in self.groups])
+
+    def gradient_from(self, ges: Sequence[np.ndarray]) -> np.ndarray:
+        """Gradient (n_nodes, 3) from the groups' element gradients, summed in group order."""
         gfull = np.zeros((self.n_nodes, 3))
-        for g in self.groups:
-            ge = np.concatenate([np.asarray(o) for o in g.run("grad", xj)])[: g.n_el]
+        for g, ge in zip(self.groups, ges, strict=True):
             self._scatter_nodes(g, ge, gfull)
         return gfull
 
@@ -587,22 +606,24 @@ class Assembly:
                 outs = g.run("grad_hess_mixed", xj, per_element=s)
             else:
                 outs = g.run("grad_hess", xj)
-            ge = np.concatenate([np.asarray(o[0]) for o in outs])[: g.n_el]
-            He = np.concatenate([np.asarray(o[1]) for o in outs])[: g.n_el]
-            return ge, He.ravel()[keep]
+            return self.joined(g, [o[0] for o in outs]), \
+                self.joined(g, [o[1] for o in outs]).ravel()[keep]
 
         # the groups' kernels run side by side on the machine's cores (JAX releases the GIL);
         # results are summed in group order afterwards, so the sum does not depend on timing
-        parts = list(_pool().map(one, range(len(self.groups))))
-        gfull = np.zeros((self.n_nodes, 3))
-        for g, (ge, _) in zip(self.groups, parts, strict=True):
-            self._scatter_nodes(g, ge, gfull)
+        return self.grad_hess_from(list(_pool().map(one, range(len(self.groups)))))
+
+    def grad_hess_from(self, parts: Sequence[tuple[np.ndarray, np.ndarray]]
+                       ) -> tuple[np.ndarray, sp.csc_matrix]:
+        """(free gradient, upper Hessian) from each group's element gradients and its kept
+        element Hessian entries (``He.ravel()[keep]``), summed in group order."""
+        gfull = self.gradient_from([p[0] for p in parts])
         v = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0)
         data = np.bincount(self._scatter, weights=v, minlength=self.nnz)
         H = sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n_free, self.n_free))
         return gfull.ravel()[self.free_dofs], H
 
-    @property
+    @functools.cached_property
     def mixed_groups(self) -> list[int]:
         """Indices of the groups written in strain form (their stresses can be carried)."""
         return [i for i, g in enumerate(self.groups) if strain_form(g.fn) is not None]
@@ -616,15 +637,13 @@ class Assembly:
         # k (e + J 0) = k e through the linearized-stress kernel, which every mixed Newton
         # iteration loads anyway (the same numbers as the "stress" kernel)
         g = self.groups[i]
-        zero = jnp.zeros_like(xj)
-        return np.concatenate([np.asarray(o) for o in g.run("stress_lin", xj, zero)])[: g.n_el]
+        return self.joined(g, g.run("stress_lin", xj, jnp.zeros_like(xj)))
 
     def stress_linearized(self, x: np.ndarray, dx: np.ndarray) -> dict[int, np.ndarray]:
         """Stresses of the strains linearized at ``x`` and moved by ``dx``: ``k (e + J dx)``."""
         xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
-        return {i: np.concatenate([np.asarray(o) for o in
-                                   self.groups[i].run("stress_lin", xj, dj)])
-                [: self.groups[i].n_el] for i in self.mixed_groups}
+        return {i: self.joined(self.groups[i], self.groups[i].run("stress_lin", xj, dj))
+                for i in self.mixed_groups}
 
     def merit(self, x: np.ndarray, dx: np.ndarray) -> tuple[float, float]:
         """(merit, energy) at ``x + dx``: the merit of a mixed Newton step from ``x``.
@@ -642,8 +661,7 @@ class Assembly:
         def one(i: int) -> tuple[float, float]:
             g = self.groups[i]
             if i in mixed:
-                me = np.concatenate([np.asarray(o) for o in g.run("merit_step", xj, dj)])
-                me = me[: g.n_el].sum(axis=0)
+                me = self.joined(g, g.run("merit_step", xj, dj)).sum(axis=0)
                 return float(me[0]), float(me[1])
             e = float(self._per_element(g, x1).sum())
             return e, e

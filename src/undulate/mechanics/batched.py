@@ -17,16 +17,33 @@ tests check the two against each other.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
-from .assemble import Assembly
+from .assemble import Assembly, gathered_kernels
 
-__all__ = ["BatchedAssembly"]
+__all__ = ["BatchedAssembly", "RunBatch", "check_same_topology"]
+
+
+def check_same_topology(assemblies: Sequence[Assembly]) -> Assembly:
+    """The first of ``assemblies`` once all have its nodes, clamps and element groups (same
+    names, energy functions and node lists; parameters may differ); ValueError otherwise."""
+    if not assemblies:
+        raise ValueError("batch of runs: no runs given")
+    ref = assemblies[0]
+    for k, a in enumerate(assemblies[1:], start=1):
+        if a.n_nodes != ref.n_nodes or not np.array_equal(a.fixed, ref.fixed):
+            raise ValueError(f"batch of runs: run {k} has other nodes or clamps")
+        if [(g.name, g.fn) for g in a.groups] != [(g.name, g.fn) for g in ref.groups]:
+            raise ValueError(f"batch of runs: run {k} has other element groups")
+        for g, h in zip(a.groups, ref.groups, strict=True):
+            if not np.array_equal(g.nodes, h.nodes):
+                raise ValueError(f"batch of runs: run {k}, group {g.name}: other nodes")
+    return ref
 
 
 class BatchedAssembly:
@@ -38,17 +55,7 @@ class BatchedAssembly:
     """
 
     def __init__(self, assemblies: Sequence[Assembly]) -> None:
-        if not assemblies:
-            raise ValueError("BatchedAssembly: no runs given")
-        ref = assemblies[0]
-        for k, a in enumerate(assemblies[1:], start=1):
-            if a.n_nodes != ref.n_nodes or not np.array_equal(a.fixed, ref.fixed):
-                raise ValueError(f"BatchedAssembly: run {k} has other nodes or clamps")
-            if [(g.name, g.fn) for g in a.groups] != [(g.name, g.fn) for g in ref.groups]:
-                raise ValueError(f"BatchedAssembly: run {k} has other element groups")
-            for g, h in zip(a.groups, ref.groups, strict=True):
-                if not np.array_equal(g.nodes, h.nodes):
-                    raise ValueError(f"BatchedAssembly: run {k}, group {g.name}: other nodes")
+        ref = check_same_topology(assemblies)
         self.ref = ref
         self.batch = len(assemblies)
         self.n_free = ref.n_free
@@ -102,3 +109,124 @@ class BatchedAssembly:
         """One run's upper-triangle Hessian (CSC) from its row of :meth:`evaluate`'s values."""
         return sp.csc_matrix((np.asarray(values, dtype=np.float64), self.ref._indices,
                               self.ref._indptr), shape=(self.n_free, self.n_free))
+
+
+_RUN_KERNELS: dict[tuple, Callable] = {}
+
+
+class RunBatch:
+    """The element kernels of ``B`` runs with one topology, each kernel called once for all of
+    them: the evaluations of :class:`~undulate.mechanics.assemble.Assembly`, batched.
+
+    Where :class:`BatchedAssembly` differentiates the whole energy itself and scatters on the
+    device, this class maps the single-run kernels (:func:`gathered_kernels`: the strain forms'
+    mixed Hessians, carried stresses, merits) over a leading run axis with ``jax.vmap``, chunk
+    by chunk as the runs' own groups are cut, and finishes each run on the host with its own
+    :class:`Assembly` (scatter, sums in group order). So every run gets the numbers its own
+    assembly would compute, and a batched Newton (:mod:`undulate.solve.batch`) follows the
+    single-run solver step by step. Every call takes inputs for all ``B`` runs (rows of runs
+    that asked for nothing are filled by the caller).
+    """
+
+    def __init__(self, assemblies: Sequence[Assembly]) -> None:
+        self.ref = check_same_topology(assemblies)
+        self.asms = list(assemblies)
+        self.batch = len(self.asms)
+        for i, g in enumerate(self.ref.groups):
+            if [a.groups[i]._sizes for a in self.asms].count(g._sizes) != self.batch:
+                raise ValueError(f"batch of runs: group {g.name} is cut into other chunks")
+        # per group, per chunk: the shared nodes and the runs' parameters stacked (B, m, ...)
+        self._chunks = [
+            [(nodes, tuple(jnp.stack([a.groups[i]._chunks[j][1][p] for a in self.asms])
+                           for p in range(len(params))))
+             for j, (nodes, params) in enumerate(g._chunks)]
+            for i, g in enumerate(self.ref.groups)
+        ]
+
+    @staticmethod
+    def _kernel(fn: Callable, name: str, n_args: int) -> Callable:
+        key = (fn, name, n_args)
+        if key not in _RUN_KERNELS:  # shared by all batches (jit keeps one program per shape)
+            k = gathered_kernels(fn)[name]
+            _RUN_KERNELS[key] = jax.jit(jax.vmap(k, in_axes=(0, None) + (0,) * n_args))
+        return _RUN_KERNELS[key]
+
+    def run(self, i: int, name: str, X: jnp.ndarray, *extra: jnp.ndarray,
+            per_element: np.ndarray | None = None) -> list:
+        """Kernel ``name`` of group ``i`` for all runs at ``X`` (B, n_nodes, 3): per chunk, the
+        outputs with a leading run axis. ``extra`` (B, ...) are global arguments of every
+        call; ``per_element`` (B, n_el, ...) is cut into chunks like the parameters."""
+        g = self.ref.groups[i]
+        pe_chunks: list[tuple] = [()] * len(self._chunks[i])
+        if per_element is not None:
+            pe = np.asarray(per_element, dtype=np.float64)
+            n_pad = sum(g._sizes)
+            pe = np.concatenate([pe, np.zeros((pe.shape[0], n_pad - g.n_el) + pe.shape[2:])],
+                                axis=1)
+            pe_chunks = [(jnp.asarray(pe[:, s0 : s0 + m]),)
+                         for s0, m in zip(g._starts, g._sizes, strict=True)]
+        out = []
+        for (nodes, params), pe_c in zip(self._chunks[i], pe_chunks, strict=True):
+            args = (*params, *pe_c, *extra)
+            out.append(self._kernel(g.fn, name, len(args))(X, nodes, *args))
+        return out
+
+    def joined(self, i: int, outs: Sequence, b: int) -> np.ndarray:
+        """Run ``b``'s rows of group ``i``'s per-chunk outputs, over its elements."""
+        return Assembly.joined(self.ref.groups[i], [np.asarray(o)[b] for o in outs])
+
+    def energy(self, X: np.ndarray) -> list[float]:
+        Xj = jnp.asarray(X)
+        per_group = [self.run(i, "per_element", Xj) for i in range(len(self.ref.groups))]
+        return [float(sum(self.joined(i, o, b).sum() for i, o in enumerate(per_group)))
+                for b in range(self.batch)]
+
+    def gradient(self, X: np.ndarray) -> list[np.ndarray]:
+        Xj = jnp.asarray(X)
+        per_group = [self.run(i, "grad", Xj) for i in range(len(self.ref.groups))]
+        return [a.gradient_from([self.joined(i, o, b) for i, o in enumerate(per_group)])
+                .ravel()[a.free_dofs] for b, a in enumerate(self.asms)]
+
+    def stress_linearized(self, X: np.ndarray, dX: np.ndarray) -> list[dict[int, np.ndarray]]:
+        Xj, dXj = jnp.asarray(X), jnp.asarray(dX)
+        outs = {i: self.run(i, "stress_lin", Xj, dXj) for i in self.ref.mixed_groups}
+        return [{i: self.joined(i, o, b) for i, o in outs.items()} for b in range(self.batch)]
+
+    def gradient_hessian(self, X: np.ndarray, stress: Sequence[dict | None]
+                         ) -> list[tuple[np.ndarray, sp.csc_matrix]]:
+        """As :meth:`Assembly.gradient_hessian` per run (``stress[b]``: run b's carried
+        stresses, or None for the consistent ones)."""
+        Xj = jnp.asarray(X)
+        mixed = self.ref.mixed_groups
+        consistent = (self.stress_linearized(X, np.zeros_like(X))
+                      if any(s is None or set(mixed) - set(s) for s in stress) else None)
+        parts: list[list] = [[] for _ in range(self.batch)]
+        for i in range(len(self.ref.groups)):
+            if i in mixed:
+                s = np.stack([st[i] if st is not None and i in st else consistent[b][i]
+                              for b, st in enumerate(stress)])
+                outs = self.run(i, "grad_hess_mixed", Xj, per_element=s)
+            else:
+                outs = self.run(i, "grad_hess", Xj)
+            for b, a in enumerate(self.asms):
+                parts[b].append((self.joined(i, [o[0] for o in outs], b),
+                                 self.joined(i, [o[1] for o in outs], b).ravel()[a._keep[i]]))
+        return [a.grad_hess_from(p) for a, p in zip(self.asms, parts, strict=True)]
+
+    def merit(self, X: np.ndarray, dX: np.ndarray) -> list[tuple[float, float]]:
+        Xj, dXj = jnp.asarray(X), jnp.asarray(dX)
+        X1 = jnp.asarray(np.asarray(X) + np.asarray(dX))
+        mixed = set(self.ref.mixed_groups)
+        sums: list[list[tuple[float, float]]] = [[] for _ in range(self.batch)]
+        for i in range(len(self.ref.groups)):
+            if i in mixed:
+                outs = self.run(i, "merit_step", Xj, dXj)
+                for b in range(self.batch):
+                    me = self.joined(i, outs, b).sum(axis=0)
+                    sums[b].append((float(me[0]), float(me[1])))
+            else:
+                outs = self.run(i, "per_element", X1)
+                for b in range(self.batch):
+                    e = float(self.joined(i, outs, b).sum())
+                    sums[b].append((e, e))
+        return [(sum(p[0] for p in ps), sum(p[1] for p in ps)) for ps in sums]

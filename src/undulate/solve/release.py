@@ -227,8 +227,13 @@ def _signed_areas(tris: np.ndarray, x: np.ndarray) -> np.ndarray:
     return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
 
-def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
-    """Run the whole experiment for ``case`` and return the final rest state."""
+def run_release(case: Case, progress: ProgressFn | None = None, *,
+                assembly: Callable[[Assembly], Assembly] | None = None) -> SimResult:
+    """Run the whole experiment for ``case`` and return the final rest state.
+
+    ``assembly``: a wrapper of the release's assembly (the batched runner of
+    :mod:`undulate.solve.batch` passes one that evaluates many runs together).
+    """
     t_start = time.perf_counter()
     sim = prepare(case)
     so = case.solver
@@ -250,6 +255,8 @@ def run_release(case: Case, progress: ProgressFn | None = None) -> SimResult:
     rest = x if imp.kind == "printed" else x_print
     printed = groups(sim, ("print",), TermState(rest, ~fixed.all(axis=1)))
     asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
+    if assembly is not None:
+        asm = assembly(asm)
     t_setup = time.perf_counter() - t_start
     if case.mode == "inertial":
         from .dynamics import release_inertial
