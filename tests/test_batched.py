@@ -116,3 +116,30 @@ def test_batched_release_refuses_runs_of_another_mesh() -> None:
 
     res = release_batch([_case(h=0.3), _case(h=0.3, L=16.0)])
     assert all(isinstance(r, ValueError) and "other nodes" in str(r) for r in res)
+
+
+@pytest.mark.slow
+def test_study_runs_a_batch_in_one_worker_with_the_single_run_results(tmp_path) -> None:
+    """``run_study(batch=...)``: runs that share a mesh (three thicknesses, two sheets) go to
+    workers as batches of that topology; the records equal those of runs made one by one."""
+    import json
+
+    from undulate import api
+    from undulate.study import run_study
+    from undulate.study.runner import batch_runs
+    from undulate.study.spec import build_study
+
+    study = build_study("batched", RELEASE, {"fabric.margin_y": [8.0, 10.0],
+                                             "rods.h": [0.2, 0.3, 0.5]}, kind="sweep")
+    tasks = batch_runs(study.runs, 4)
+    assert sorted(len(t) for t in tasks) == [3, 3]  # by sheet, not by h
+    assert all(len({r.case["fabric"]["margin_y"] for r in t}) == 1 for t in tasks)
+    summary = run_study(study, tmp_path, workers=1, progress=False, artifacts=False, batch=4)
+    assert summary.ok == 6 and summary.failed == 0
+    for r in study.runs:
+        rec = json.loads((tmp_path / "runs" / f"{r.id}.json").read_text())
+        assert rec["batch"] == 3
+        one = api.run_case(r.case, artifacts=False)
+        assert rec["record"]["newton_iterations"] == one["newton_iterations"]
+        assert rec["record"]["n"] == one["n"]
+        assert rec["record"]["l_mean"] == pytest.approx(one["l_mean"], rel=1e-2)

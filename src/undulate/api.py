@@ -12,7 +12,7 @@ Units: mm, MPa, N, s.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +33,7 @@ __all__ = [
     "simulate",
     "analyse",
     "run_case",
+    "run_cases",
 ]
 
 DEMO = {
@@ -174,18 +175,65 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
         if stage is not None:
             stage("set-up: mesh, pre-stretch, printing")
         result = simulate(case, progress)
-        if stage is not None:
-            stage("analysis: fitting sines and arc chains")
-        ana = analyse(result)
-        rec = _flat_record(result, ana)
-        if staged is not None:
-            if stage is not None:
-                stage(f"writing outputs to {out}")
-            _write_outputs(result, ana, staged.path, artifacts)
-            staged.commit()
+        return _record_and_write(result, staged, artifacts, stage)
     finally:
         if staged is not None:
             staged.discard()
+
+
+def run_cases(cases: Sequence[Case | dict], outs: Sequence[str | Path | None] | None = None,
+              artifacts: bool = True) -> list[dict[str, Any] | Exception]:
+    """:func:`run_case` for many cases that share a mesh (a study's runs over h, the moduli or
+    the seed), released together: their energy evaluations are batched across runs
+    (:mod:`undulate.solve.batch`), each run keeps its own solver and ends in the state a
+    single run would. Returns per case its record or the exception that ended it (an
+    :class:`OutputError` for an unusable ``out``, a ``ConvergenceError``, or a ValueError when
+    the cases do not share a mesh)."""
+    from .interfaces.output import StagedDir
+    from .solve.batch import release_batch
+
+    outs = list(outs) if outs is not None else [None] * len(cases)
+    if len(outs) != len(cases):
+        raise ValueError(f"run_cases: {len(cases)} cases but {len(outs)} output folders")
+    parsed: list[Case] = [case_from_dict(c) if isinstance(c, dict) else c for c in cases]
+    staged: list[Any] = []
+    out: list[dict[str, Any] | Exception | None] = [None] * len(parsed)
+    try:
+        for k, o in enumerate(outs):
+            try:
+                staged.append(StagedDir(o) if o is not None else None)
+            except Exception as err:  # noqa: BLE001 - reported for this case
+                staged.append(None)
+                out[k] = err
+        todo = [k for k in range(len(parsed)) if out[k] is None]
+        for k, res in zip(todo, release_batch([parsed[k] for k in todo]), strict=True):
+            if isinstance(res, Exception):
+                out[k] = res
+                continue
+            try:
+                out[k] = _record_and_write(res, staged[k], artifacts, None)
+            except Exception as err:  # noqa: BLE001 - reported for this case
+                out[k] = err
+    finally:
+        for st in staged:
+            if st is not None:
+                st.discard()
+    return [r if r is not None else RuntimeError("no result") for r in out]
+
+
+def _record_and_write(result: SimResult, staged: Any, artifacts: bool,
+                      stage: StageFn | None) -> dict[str, Any]:
+    """Analyse a result, write its files into ``staged`` (a StagedDir, or None) and commit
+    them; return the flat record."""
+    if stage is not None:
+        stage("analysis: fitting sines and arc chains")
+    ana = analyse(result)
+    rec = _flat_record(result, ana)
+    if staged is not None:
+        if stage is not None:
+            stage(f"writing outputs to {staged.out}")
+        _write_outputs(result, ana, staged.path, artifacts)
+        staged.commit()
     return rec
 
 

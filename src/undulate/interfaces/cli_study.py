@@ -54,6 +54,13 @@ def run_cmd(
     seeds: Annotated[
         int | None, typer.Option("--seeds", min=1, help="seeds 0..K-1 per parameter point")
     ] = None,
+    batch: Annotated[
+        int,
+        typer.Option("--batch", min=1, max=4096,
+                     help="release up to this many runs that share a mesh (runs over h, E_B, "
+                          "the seed) together in one worker, their evaluations batched "
+                          "(for a GPU; same states as one by one)"),
+    ] = 1,
     runner: Annotated[
         str | None,
         typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
@@ -79,6 +86,7 @@ def run_cmd(
             artifacts=not no_artifacts,
             progress=True,
             console=_err,
+            batch=batch,
         )
     except StudyError as err:
         _fail(str(err))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import json
 import multiprocessing
 import os
 import shutil
@@ -42,7 +43,8 @@ from .storage import (
     write_table,
 )
 
-__all__ = ["RunFn", "RunSummary", "run_study", "execute_run", "resolve_runner", "RUNNER_ENV"]
+__all__ = ["RunFn", "RunSummary", "run_study", "execute_run", "execute_batch", "batch_runs",
+           "resolve_runner", "RUNNER_ENV"]
 
 RunFn = Callable[..., dict]
 RUNNER_ENV = "UNDULATE_STUDY_RUNNER"
@@ -136,6 +138,110 @@ def execute_run(
         cpus=usable_cpus(),
     )
     return result
+
+
+#: case fields that change no mesh, clamp or element group, only element parameters, the
+#: start imperfection or a run's own solver settings: runs that differ only in these share a
+#: topology and can be released as one batch (``run_study(batch=...)``)
+BATCHABLE_FIELDS = (
+    ("name",), ("rods", "h"), ("rods", "E_B"), ("rods", "nu_B"), ("rods", "rho_B"),
+    ("fabric", "rho"), ("imperfection", "seed"), ("imperfection", "amplitude"),
+    ("imperfection", "correlation"), ("solver",), ("dynamics",), ("mode",),
+    ("release", "steps"), ("release", "adaptive"), ("release", "min_step_fraction"),
+    ("release", "max_step_factor"), ("release", "onset_substeps"),
+    ("release", "snap_iterations"), ("release", "snap_resolution"),
+)
+
+
+def topology_key(case_dict: dict[str, Any]) -> str:
+    """A key equal for cases that share mesh, clamps and element groups (the resolved case
+    without :data:`BATCHABLE_FIELDS`); a case that does not parse gets a key of its own."""
+    try:
+        from undulate.model import case_from_dict
+
+        full = case_from_dict(case_dict).model_dump(mode="json")
+    except Exception:  # noqa: BLE001 - the run reports its own error when it is executed
+        return f"invalid:{id(case_dict)}"
+    for path in BATCHABLE_FIELDS:
+        node: Any = full
+        for part in path[:-1]:
+            node = node.get(part, {})
+        node.pop(path[-1], None)
+    return json.dumps(full, sort_keys=True)
+
+
+def batch_runs(runs: list[RunSpec], size: int) -> list[list[RunSpec]]:
+    """``runs`` cut into batches of at most ``size`` runs that share a topology (in the order
+    of their first run); ``size`` 1: one run per batch."""
+    if size <= 1:
+        return [[r] for r in runs]
+    groups: dict[str, list[RunSpec]] = {}
+    for r in runs:
+        groups.setdefault(topology_key(r.case), []).append(r)
+    out = []
+    for members in groups.values():
+        out.extend(members[k : k + size] for k in range(0, len(members), size))
+    return sorted(out, key=lambda b: runs.index(b[0]))
+
+
+def execute_batch(
+    runner: RunFn | str | None,
+    case_dicts: list[dict[str, Any]],
+    outs: list[str | None],
+    artifacts: bool = True,
+) -> list[dict[str, Any]]:
+    """Run cases that share a topology together (:func:`undulate.api.run_cases`, the engine's
+    batched release) in the current process; one result per case, as :func:`execute_run`
+    gives (``elapsed_s``: the batch's wall time shared equally; ``batch``: its size). A
+    custom runner, a single case, or cases that turn out not to share a mesh run one by one.
+    """
+    if runner is not None or len(case_dicts) <= 1:
+        return [execute_run(runner, c, o, artifacts) for c, o in zip(case_dicts, outs,
+                                                                    strict=True)]
+    started = _now()
+    t0 = time.perf_counter()
+    from undulate.api import run_cases
+    from undulate.model import case_from_dict
+
+    results: list[dict[str, Any]] = [{"record": None, "error": None, "traceback": None}
+                                     for _ in case_dicts]
+    todo: list[int] = []
+    cases, paths = [], []
+    for k, (cd, o) in enumerate(zip(case_dicts, outs, strict=True)):
+        try:
+            case = case_from_dict(cd)
+        except Exception as err:  # noqa: BLE001 - reported for this run
+            results[k].update(status="failed", error=f"{type(err).__name__}: {err}",
+                              traceback=_tb_summary(err))
+            continue
+        results[k]["case_resolved"] = case.model_dump(mode="json")
+        out_path = Path(o) if (o is not None and artifacts) else None
+        if out_path is not None:
+            if out_path.is_dir():
+                shutil.rmtree(out_path)
+            out_path.mkdir(parents=True, exist_ok=True)
+        todo.append(k)
+        cases.append(case)
+        paths.append(out_path)
+    recs = run_cases(cases, paths, artifacts) if cases else []
+    if recs and all(isinstance(r, ValueError) and str(r).startswith("batch of runs:")
+                    for r in recs):
+        # not one topology after all (a field outside BATCHABLE_FIELDS that changes nothing
+        # of the mesh would only cost the batching): run them one by one
+        return [execute_run(runner, c, o, artifacts) for c, o in zip(case_dicts, outs,
+                                                                    strict=True)]
+    for k, rec in zip(todo, recs, strict=True):
+        if isinstance(rec, Exception):
+            results[k].update(status="failed", error=f"{type(rec).__name__}: {rec}",
+                              traceback=_tb_summary(rec))
+        else:
+            results[k].update(status="ok", record=jsonable(rec))
+    wall = time.perf_counter() - t0
+    for res in results:
+        res.update(started=started, finished=_now(), elapsed_s=round(wall / len(results), 6),
+                   batch=len(results), host=socket.gethostname(), pid=os.getpid(),
+                   engine=engine_id(), cpus=usable_cpus())
+    return results
 
 
 #: the packages whose code decides a run's numbers (not the interfaces, studies, figures)
@@ -278,6 +384,7 @@ def run_study(
     progress: bool = True,
     console: Any = None,
     write_results: bool = True,
+    batch: int = 1,
 ) -> RunSummary:
     """Run every run of ``study`` that has no record in ``out`` yet (plus failures if asked).
 
@@ -288,6 +395,10 @@ def run_study(
     ``dask_address``: a dask.distributed scheduler address (or a ``Client``/``LocalCluster``
     object); runs are submitted as tasks, results come back to this process which writes them.
     ``artifacts``: pass ``DIR/artifacts/<id>`` as ``out`` to the run function, else None.
+    ``batch``: with the engine's runner, release up to this many runs that share a topology
+    (:func:`batch_runs`) together in one worker (:func:`execute_batch`): their evaluations
+    are batched across runs, each run ends in its single-run state. Each worker then gives
+    its PARDISO one thread (the batch's runs factor side by side).
     A ``KeyboardInterrupt`` stops submitting, keeps every finished record and re-raises.
     """
     out = Path(out)
@@ -351,6 +462,7 @@ def run_study(
             "pid": res.get("pid"),
             "engine": res.get("engine"),
             "cpus": res.get("cpus"),
+            "batch": res.get("batch"),
             "artifacts": (f"artifacts/{r.id}" if artifacts else None),
         }
         write_record(out, rec)
@@ -372,6 +484,7 @@ def run_study(
             # one worker, so that a crash or a process grown large cannot end the study; a
             # function passed in (tests, notebooks) runs here
             isolate = not callable(run_fn) and len(todo) > 1
+            tasks = batch_runs(todo, batch if not callable(run_fn) else 1)
             if (n <= 1 and not isolate) or len(todo) <= 1:
                 for r in todo:
                     bar.running = 1
@@ -379,7 +492,8 @@ def run_study(
                     finish(r, execute_run(run_fn, r.case, artifact_dir(r), artifacts))
                 bar.running = 0
             else:
-                _run_pool(todo, n, run_fn, artifacts, artifact_dir, finish, bar)
+                _run_pool(tasks, n, run_fn, artifacts, artifact_dir, finish, bar,
+                          threads=1 if batch > 1 else None)
     except KeyboardInterrupt:
         summary.interrupted = True
         raise
@@ -419,74 +533,87 @@ def _init_worker(path: list[str], pardiso_threads: int | None = None) -> None:
 
 
 def _run_pool(
-    todo: list[RunSpec],
+    todo: list[list[RunSpec]],
     workers: int,
     run_fn: RunFn | str | None,
     artifacts: bool,
     artifact_dir: Callable[[RunSpec], str | None],
     finish: Callable[[RunSpec, dict[str, Any]], None],
     bar: _Progress,
+    threads: int | None = None,
 ) -> None:
-    """Bounded submission to a process pool: at most ``workers`` runs in flight.
+    """Bounded submission to a process pool: at most ``workers`` tasks in flight, a task being
+    one run or a batch of runs (:func:`execute_batch`).
 
-    Every ``RUNS_PER_WORKER x workers`` runs the pool is drained and replaced by fresh
+    Every ``RUNS_PER_WORKER x workers`` tasks the pool is drained and replaced by fresh
     processes. A worker that dies (a crash of the interpreter, not an exception: those are results)
-    breaks the whole pool, and every run in flight then fails with it, so the culprit is not
-    known. Those runs are retried one at a time in a fresh pool (a *suspect* never shares the
-    pool with another run); a run that kills its worker alone ``_MAX_CRASHES`` times is
-    recorded as failed, and an innocent neighbour is never blamed.
+    breaks the whole pool, and every task in flight then fails with it, so the culprit is not
+    known. Those tasks are retried one at a time in a fresh pool (a *suspect* never shares the
+    pool with another task); a task that kills its worker alone ``_MAX_CRASHES`` times is
+    recorded as failed, and an innocent neighbour is never blamed. ``threads``: PARDISO
+    threads per worker (default: the worker's share of the cores).
     """
     queue = list(reversed(todo))
     crashes: dict[str, int] = {}
     suspects: set[str] = set()
+
+    def key(task: list[RunSpec]) -> str:
+        return task[0].id
+
     while queue:
         # spawn, not fork: the engine uses JAX, which is multithreaded (fork can deadlock)
-        pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                   initargs=(list(sys.path), worker_pardiso_threads(workers)),
-                                   mp_context=multiprocessing.get_context("spawn"))
-        inflight: dict[Future, RunSpec] = {}
+        pool = ProcessPoolExecutor(
+            max_workers=workers, initializer=_init_worker,
+            initargs=(list(sys.path), threads or worker_pardiso_threads(workers)),
+            mp_context=multiprocessing.get_context("spawn"))
+        inflight: dict[Future, list[RunSpec]] = {}
         broken = False
-        # the pool is replaced after RUNS_PER_WORKER runs per worker (drained first; not
+        # the pool is replaced after RUNS_PER_WORKER tasks per worker (drained first; not
         # max_tasks_per_child, which can deadlock on Python 3.11-3.13: cpython gh-115634)
         budget = RUNS_PER_WORKER * workers
         try:
             while queue or inflight:
                 while queue and len(inflight) < workers and not broken and budget > 0:
-                    alone = any(r.id in suspects for r in inflight.values())
-                    if alone or (inflight and queue[-1].id in suspects):
+                    alone = any(key(t) in suspects for t in inflight.values())
+                    if alone or (inflight and key(queue[-1]) in suspects):
                         break  # a suspect runs alone
-                    r = queue.pop()
+                    task = queue.pop()
                     try:
-                        fut = pool.submit(execute_run, run_fn, r.case, artifact_dir(r), artifacts)
+                        fut = pool.submit(execute_batch, run_fn, [r.case for r in task],
+                                          [artifact_dir(r) for r in task], artifacts)
                     except BrokenProcessPool:
-                        queue.append(r)
+                        queue.append(task)
                         broken = True
                         break
-                    inflight[fut] = r
+                    inflight[fut] = task
                     budget -= 1
-                bar.running = len(inflight)
+                bar.running = sum(len(t) for t in inflight.values())
                 bar.update()
                 if not inflight:
                     break
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
                 for fut in done:
-                    r = inflight.pop(fut)
+                    task = inflight.pop(fut)
+                    k = key(task)
                     try:
-                        res = fut.result()
+                        results = fut.result()
                     except BrokenProcessPool:
                         broken = True
-                        if r.id in suspects and not inflight and len(done) == 1:
-                            crashes[r.id] = crashes.get(r.id, 0) + 1  # it died alone
-                        suspects.add(r.id)
-                        if crashes.get(r.id, 0) >= _MAX_CRASHES:
-                            finish(r, _crash_result("worker process died (BrokenProcessPool)"))
+                        if k in suspects and not inflight and len(done) == 1:
+                            crashes[k] = crashes.get(k, 0) + 1  # it died alone
+                        suspects.add(k)
+                        if crashes.get(k, 0) >= _MAX_CRASHES:
+                            for r in task:
+                                finish(r, _crash_result("worker process died "
+                                                        "(BrokenProcessPool)"))
                         else:
-                            queue.append(r)
+                            queue.append(task)
                         continue
                     except Exception as err:  # e.g. unpicklable result
-                        res = _crash_result(f"{type(err).__name__}: {err}")
-                    suspects.discard(r.id)
-                    finish(r, res)
+                        results = [_crash_result(f"{type(err).__name__}: {err}")] * len(task)
+                    suspects.discard(k)
+                    for r, res in zip(task, results, strict=True):
+                        finish(r, res)
                 if broken and not inflight:
                     break
         except BaseException:
@@ -498,7 +625,7 @@ def _run_pool(
             raise
         pool.shutdown(wait=True)
         if not broken and budget > 0:
-            break  # every run done (a spent budget goes round again with a fresh pool)
+            break  # every task done (a spent budget goes round again with a fresh pool)
 
 
 def _crash_result(error: str, local: bool = True) -> dict[str, Any]:
