@@ -80,3 +80,10 @@ def test_bad_sweep_and_not_a_study(tmp_path: Path) -> None:
     for cmd in ("status", "figures", "report"):
         res = runner.invoke(app, ["study", cmd, str(tmp_path / "nothing")])
         assert res.exit_code == 2 and "not a study directory" in res.output
+
+
+def test_batch_with_dask_is_refused_in_one_line(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["study", "run", "single-rod-h", "--quick", "--out",
+                              str(tmp_path / "s"), "--batch", "4", "--dask", "tcp://127.0.0.1:1"])
+    assert res.exit_code == 2
+    assert "batch: runs are batched in local workers only" in res.output

@@ -115,7 +115,7 @@ _RUN_KERNELS: dict[tuple, Callable] = {}
 
 
 class RunBatch:
-    """The element kernels of ``B`` runs with one topology, each kernel called once for all of
+    """The element kernels of ``B`` runs with one topology, each kernel called once for many of
     them: the evaluations of :class:`~undulate.mechanics.assemble.Assembly`, batched.
 
     Where :class:`BatchedAssembly` differentiates the whole energy itself and scatters on the
@@ -124,8 +124,12 @@ class RunBatch:
     by chunk as the runs' own groups are cut, and finishes each run on the host with its own
     :class:`Assembly` (scatter, sums in group order). So every run gets the numbers its own
     assembly would compute, and a batched Newton (:mod:`undulate.solve.batch`) follows the
-    single-run solver step by step. Every call takes inputs for all ``B`` runs (rows of runs
-    that asked for nothing are filled by the caller).
+    single-run solver step by step.
+
+    Every method takes ``runs``, the indices of the runs to evaluate (one row each; an index
+    may repeat, to fill a row), and their inputs stacked along the first axis; it returns one
+    result per row. Each distinct number of rows is one more compiled program per kernel: the
+    caller keeps to a few (:mod:`undulate.solve.batch` uses powers of two).
     """
 
     def __init__(self, assemblies: Sequence[Assembly]) -> None:
@@ -151,12 +155,14 @@ class RunBatch:
             _RUN_KERNELS[key] = jax.jit(jax.vmap(k, in_axes=(0, None) + (0,) * n_args))
         return _RUN_KERNELS[key]
 
-    def run(self, i: int, name: str, X: jnp.ndarray, *extra: jnp.ndarray,
+    def run(self, runs: Sequence[int], i: int, name: str, X: jnp.ndarray, *extra: jnp.ndarray,
             per_element: np.ndarray | None = None) -> list:
-        """Kernel ``name`` of group ``i`` for all runs at ``X`` (B, n_nodes, 3): per chunk, the
-        outputs with a leading run axis. ``extra`` (B, ...) are global arguments of every
-        call; ``per_element`` (B, n_el, ...) is cut into chunks like the parameters."""
+        """Kernel ``name`` of group ``i`` for ``runs`` at ``X`` (rows, n_nodes, 3): per chunk,
+        the outputs with a leading row axis. ``extra`` (rows, ...) are global arguments of
+        every call; ``per_element`` (rows, n_el, ...) is cut into chunks like the parameters."""
         g = self.ref.groups[i]
+        rows = jnp.asarray(np.asarray(runs, dtype=np.int64))
+        every = len(runs) == self.batch and list(runs) == list(range(self.batch))
         pe_chunks: list[tuple] = [()] * len(self._chunks[i])
         if per_element is not None:
             pe = np.asarray(per_element, dtype=np.float64)
@@ -167,66 +173,74 @@ class RunBatch:
                          for s0, m in zip(g._starts, g._sizes, strict=True)]
         out = []
         for (nodes, params), pe_c in zip(self._chunks[i], pe_chunks, strict=True):
-            args = (*params, *pe_c, *extra)
+            args = (*(params if every else (p[rows] for p in params)), *pe_c, *extra)
             out.append(self._kernel(g.fn, name, len(args))(X, nodes, *args))
         return out
 
-    def joined(self, i: int, outs: Sequence, b: int) -> np.ndarray:
-        """Run ``b``'s rows of group ``i``'s per-chunk outputs, over its elements."""
-        return Assembly.joined(self.ref.groups[i], [np.asarray(o)[b] for o in outs])
+    def _joined(self, i: int, outs: Sequence, row: int) -> np.ndarray:
+        """One row of group ``i``'s per-chunk outputs, over the group's elements."""
+        return Assembly.joined(self.ref.groups[i], [np.asarray(o)[row] for o in outs])
 
-    def energy(self, X: np.ndarray) -> list[float]:
+    def energy(self, runs: Sequence[int], X: np.ndarray) -> list[float]:
         Xj = jnp.asarray(X)
-        per_group = [self.run(i, "per_element", Xj) for i in range(len(self.ref.groups))]
-        return [float(sum(self.joined(i, o, b).sum() for i, o in enumerate(per_group)))
-                for b in range(self.batch)]
+        per_group = [self.run(runs, i, "per_element", Xj) for i in range(len(self.ref.groups))]
+        return [float(sum(self._joined(i, o, r).sum() for i, o in enumerate(per_group)))
+                for r in range(len(runs))]
 
-    def gradient(self, X: np.ndarray) -> list[np.ndarray]:
+    def gradient(self, runs: Sequence[int], X: np.ndarray) -> list[np.ndarray]:
         Xj = jnp.asarray(X)
-        per_group = [self.run(i, "grad", Xj) for i in range(len(self.ref.groups))]
-        return [a.gradient_from([self.joined(i, o, b) for i, o in enumerate(per_group)])
-                .ravel()[a.free_dofs] for b, a in enumerate(self.asms)]
+        per_group = [self.run(runs, i, "grad", Xj) for i in range(len(self.ref.groups))]
+        out = []
+        for r, b in enumerate(runs):
+            a = self.asms[b]
+            g = a.gradient_from([self._joined(i, o, r) for i, o in enumerate(per_group)])
+            out.append(g.ravel()[a.free_dofs])
+        return out
 
-    def stress_linearized(self, X: np.ndarray, dX: np.ndarray) -> list[dict[int, np.ndarray]]:
+    def stress_linearized(self, runs: Sequence[int], X: np.ndarray, dX: np.ndarray
+                          ) -> list[dict[int, np.ndarray]]:
         Xj, dXj = jnp.asarray(X), jnp.asarray(dX)
-        outs = {i: self.run(i, "stress_lin", Xj, dXj) for i in self.ref.mixed_groups}
-        return [{i: self.joined(i, o, b) for i, o in outs.items()} for b in range(self.batch)]
+        outs = {i: self.run(runs, i, "stress_lin", Xj, dXj) for i in self.ref.mixed_groups}
+        return [{i: self._joined(i, o, r) for i, o in outs.items()} for r in range(len(runs))]
 
-    def gradient_hessian(self, X: np.ndarray, stress: Sequence[dict | None]
+    def gradient_hessian(self, runs: Sequence[int], X: np.ndarray,
+                         stress: Sequence[dict | None]
                          ) -> list[tuple[np.ndarray, sp.csc_matrix]]:
-        """As :meth:`Assembly.gradient_hessian` per run (``stress[b]``: run b's carried
+        """As :meth:`Assembly.gradient_hessian` per row (``stress[r]``: the row's carried
         stresses, or None for the consistent ones)."""
         Xj = jnp.asarray(X)
         mixed = self.ref.mixed_groups
-        consistent = (self.stress_linearized(X, np.zeros_like(X))
+        consistent = (self.stress_linearized(runs, X, np.zeros_like(X))
                       if any(s is None or set(mixed) - set(s) for s in stress) else None)
-        parts: list[list] = [[] for _ in range(self.batch)]
+        parts: list[list] = [[] for _ in runs]
         for i in range(len(self.ref.groups)):
             if i in mixed:
-                s = np.stack([st[i] if st is not None and i in st else consistent[b][i]
-                              for b, st in enumerate(stress)])
-                outs = self.run(i, "grad_hess_mixed", Xj, per_element=s)
+                s = np.stack([st[i] if st is not None and i in st else consistent[r][i]
+                              for r, st in enumerate(stress)])
+                outs = self.run(runs, i, "grad_hess_mixed", Xj, per_element=s)
             else:
-                outs = self.run(i, "grad_hess", Xj)
-            for b, a in enumerate(self.asms):
-                parts[b].append((self.joined(i, [o[0] for o in outs], b),
-                                 self.joined(i, [o[1] for o in outs], b).ravel()[a._keep[i]]))
-        return [a.grad_hess_from(p) for a, p in zip(self.asms, parts, strict=True)]
+                outs = self.run(runs, i, "grad_hess", Xj)
+            for r, b in enumerate(runs):
+                parts[r].append((self._joined(i, [o[0] for o in outs], r),
+                                 self._joined(i, [o[1] for o in outs], r)
+                                 .ravel()[self.asms[b]._keep[i]]))
+        return [self.asms[b].grad_hess_from(p) for b, p in zip(runs, parts, strict=True)]
 
-    def merit(self, X: np.ndarray, dX: np.ndarray) -> list[tuple[float, float]]:
+    def merit(self, runs: Sequence[int], X: np.ndarray, dX: np.ndarray
+              ) -> list[tuple[float, float]]:
         Xj, dXj = jnp.asarray(X), jnp.asarray(dX)
         X1 = jnp.asarray(np.asarray(X) + np.asarray(dX))
         mixed = set(self.ref.mixed_groups)
-        sums: list[list[tuple[float, float]]] = [[] for _ in range(self.batch)]
+        sums: list[list[tuple[float, float]]] = [[] for _ in runs]
         for i in range(len(self.ref.groups)):
             if i in mixed:
-                outs = self.run(i, "merit_step", Xj, dXj)
-                for b in range(self.batch):
-                    me = self.joined(i, outs, b).sum(axis=0)
-                    sums[b].append((float(me[0]), float(me[1])))
+                outs = self.run(runs, i, "merit_step", Xj, dXj)
+                for r in range(len(runs)):
+                    me = self._joined(i, outs, r).sum(axis=0)
+                    sums[r].append((float(me[0]), float(me[1])))
             else:
-                outs = self.run(i, "per_element", X1)
-                for b in range(self.batch):
-                    e = float(self.joined(i, outs, b).sum())
-                    sums[b].append((e, e))
+                outs = self.run(runs, i, "per_element", X1)
+                for r in range(len(runs)):
+                    e = float(self._joined(i, outs, r).sum())
+                    sums[r].append((e, e))
         return [(sum(p[0] for p in ps), sum(p[1] for p in ps)) for ps in sums]

@@ -6,9 +6,9 @@ gradient and a Hessian, evaluate energies along a line search, linearize stresse
 run follows the single-run release of :mod:`undulate.solve.release` unchanged, in its own
 thread, but its :class:`~undulate.mechanics.assemble.Assembly` is replaced by a
 :class:`BatchMember` whose evaluations wait at a rendezvous: once every live run waits, the
-requests are grouped by kind and each kind is evaluated for all runs in one ``vmap``-ed call
-per element chunk (:class:`~undulate.mechanics.batched.RunBatch`). Runs that asked for
-something else, or have finished, fill their rows with a copy (the mask of a batched solver).
+requests are grouped by kind and each kind is evaluated for the runs that asked in one
+``vmap``-ed call per element chunk (:class:`~undulate.mechanics.batched.RunBatch`), their rows
+filled up with copies to a power of two (a few compiled shapes per kernel).
 
 So the batched path takes the same decisions as the single-run engine (each run keeps its own
 step control, curved steps, line searches and linear solver) and ends in the same states;
@@ -122,26 +122,33 @@ class _Rendezvous:
             r.done = True
         self.cv.notify_all()
 
-    def _evaluate(self, kind: str, reqs: dict[int, _Request]) -> list:
+    def _evaluate(self, kind: str, reqs: dict[int, _Request]) -> dict[int, Any]:
+        """One batched evaluation of ``kind`` for the runs in ``reqs``: their rows, filled up
+        with copies of the first to a power of two (at most the batch size), so that a kernel
+        has a few compiled shapes, not one per number of runs asking."""
         batch = self.batch
         assert batch is not None
-        filler = next(iter(reqs.values())).args
-        rows = [reqs[b].args if b in reqs else filler for b in range(batch.batch)]
+        runs = sorted(reqs)
+        m = min(1 << (len(runs) - 1).bit_length(), batch.batch)
+        runs = runs + [runs[0]] * (m - len(runs))
+        rows = [reqs[b].args for b in runs]
 
         def stacked(k: int) -> np.ndarray:
             return np.stack([np.asarray(r[k], dtype=np.float64) for r in rows])
 
         if kind == "energy":
-            return batch.energy(stacked(0))
-        if kind == "gradient":
-            return batch.gradient(stacked(0))
-        if kind == "gradient_hessian":
-            return batch.gradient_hessian(stacked(0), [r[1] for r in rows])
-        if kind == "stress_linearized":
-            return batch.stress_linearized(stacked(0), stacked(1))
-        if kind == "merit":
-            return batch.merit(stacked(0), stacked(1))
-        raise ValueError(f"batch of runs: unknown request {kind!r}")  # pragma: no cover
+            values = batch.energy(runs, stacked(0))
+        elif kind == "gradient":
+            values = batch.gradient(runs, stacked(0))
+        elif kind == "gradient_hessian":
+            values = batch.gradient_hessian(runs, stacked(0), [r[1] for r in rows])
+        elif kind == "stress_linearized":
+            values = batch.stress_linearized(runs, stacked(0), stacked(1))
+        elif kind == "merit":
+            values = batch.merit(runs, stacked(0), stacked(1))
+        else:  # pragma: no cover
+            raise ValueError(f"batch of runs: unknown request {kind!r}")
+        return {b: values[r] for r, b in enumerate(runs[: len(reqs)])}
 
 
 class BatchMember:

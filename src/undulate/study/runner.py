@@ -401,6 +401,11 @@ def run_study(
     its PARDISO one thread (the batch's runs factor side by side).
     A ``KeyboardInterrupt`` stops submitting, keeps every finished record and re-raises.
     """
+    if batch > 1 and dask_address is not None:
+        raise StudyError("batch: runs are batched in local workers only; leave out --batch "
+                         "(or --dask)")
+    if batch < 1:
+        raise StudyError(f"batch: must be at least 1 (got {batch})")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "runs").mkdir(exist_ok=True)
