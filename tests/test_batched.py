@@ -66,11 +66,17 @@ def _case(**rods: float):
     return case_from_dict({**RELEASE, "rods": {**SMALL["rods"], **rods}})
 
 
-def test_batched_release_ends_in_the_single_run_states() -> None:
+@pytest.mark.parametrize("device_scatter", [False, True])
+def test_batched_release_ends_in_the_single_run_states(device_scatter: bool,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """Three thicknesses released together take the single-run engine's path: same Newton
-    iterations, same final positions (to roundoff), same n and l."""
+    iterations, same final positions (to roundoff), same n and l; with the element Hessians
+    scattered on the host (the CPU's way) or on the device (an accelerator's)."""
     from undulate import api
+    from undulate.mechanics.batched import RunBatch
     from undulate.solve.batch import release_batch
+
+    monkeypatch.setattr(RunBatch, "DEVICE_SCATTER", device_scatter)
 
     cases = [_case(h=h) for h in (0.2, 0.3, 0.5)]
     stats: dict = {}

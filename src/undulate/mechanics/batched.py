@@ -17,6 +17,7 @@ tests check the two against each other.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 
 import jax
@@ -203,6 +204,12 @@ class RunBatch:
         outs = {i: self.run(runs, i, "stress_lin", Xj, dXj) for i in self.ref.mixed_groups}
         return [{i: self._joined(i, o, r) for i, o in outs.items()} for r in range(len(runs))]
 
+    #: scatter element gradients and Hessians into the runs' arrays on the device (one
+    #: indexed add per chunk for all rows) instead of on the host run by run: on an
+    #: accelerator, where it saves copying every element Hessian back (not measured yet); not
+    #: on a CPU, where it was slower (4 single rods: 108 s against 74 s; docs/benchmarks.md)
+    DEVICE_SCATTER = jax.default_backend() != "cpu"
+
     def gradient_hessian(self, runs: Sequence[int], X: np.ndarray,
                          stress: Sequence[dict | None]
                          ) -> list[tuple[np.ndarray, sp.csc_matrix]]:
@@ -212,19 +219,61 @@ class RunBatch:
         mixed = self.ref.mixed_groups
         consistent = (self.stress_linearized(runs, X, np.zeros_like(X))
                       if any(s is None or set(mixed) - set(s) for s in stress) else None)
-        parts: list[list] = [[] for _ in runs]
+        per_group = []
         for i in range(len(self.ref.groups)):
             if i in mixed:
                 s = np.stack([st[i] if st is not None and i in st else consistent[r][i]
                               for r, st in enumerate(stress)])
-                outs = self.run(runs, i, "grad_hess_mixed", Xj, per_element=s)
+                per_group.append(self.run(runs, i, "grad_hess_mixed", Xj, per_element=s))
             else:
-                outs = self.run(runs, i, "grad_hess", Xj)
+                per_group.append(self.run(runs, i, "grad_hess", Xj))
+        if self.DEVICE_SCATTER:
+            return self._scattered(runs, per_group)
+        parts: list[list] = [[] for _ in runs]
+        for i, outs in enumerate(per_group):
             for r, b in enumerate(runs):
                 parts[r].append((self._joined(i, [o[0] for o in outs], r),
                                  self._joined(i, [o[1] for o in outs], r)
                                  .ravel()[self.asms[b]._keep[i]]))
         return [self.asms[b].grad_hess_from(p) for b, p in zip(runs, parts, strict=True)]
+
+    @functools.cached_property
+    def _scatter_maps(self) -> list[list[tuple[int, jnp.ndarray, jnp.ndarray, jnp.ndarray]]]:
+        """Per group, per chunk: (real elements r, their dofs (r k 3,), the kept entries of
+        the chunk's flattened element Hessians, where they go among the nnz values)."""
+        ref = self.ref
+        offs = np.concatenate([[0], np.cumsum([np.count_nonzero(k) for k in ref._keep])])
+        maps = []
+        for i, g in enumerate(ref.groups):
+            d2 = (3 * g.k) ** 2
+            keep = ref._keep[i].reshape(g.n_el, d2)
+            before = np.concatenate([[0], np.cumsum(keep.sum(axis=1))])
+            scatter = ref._scatter[offs[i] : offs[i + 1]]
+            chunks = []
+            for s0, m in zip(g._starts, g._sizes, strict=True):
+                r = int(min(m, g.n_el - s0))
+                dofs = (3 * g.nodes[s0 : s0 + r][:, :, None] + np.arange(3)).ravel()
+                idx = np.nonzero(keep[s0 : s0 + r].ravel())[0]
+                chunks.append((r, jnp.asarray(dofs), jnp.asarray(idx),
+                               jnp.asarray(scatter[before[s0] : before[s0 + r]])))
+            maps.append(chunks)
+        return maps
+
+    def _scattered(self, runs: Sequence[int], per_group: list[list]
+                   ) -> list[tuple[np.ndarray, sp.csc_matrix]]:
+        ref = self.ref
+        rows = len(runs)
+        gfull = jnp.zeros((rows, 3 * ref.n_nodes))
+        hv = jnp.zeros((rows, ref.nnz))
+        for outs, maps in zip(per_group, self._scatter_maps, strict=True):
+            for (ge, he), (r, dofs, idx, dest) in zip(outs, maps, strict=True):
+                gfull = gfull.at[:, dofs].add(ge[:, :r].reshape(rows, -1))
+                hv = hv.at[:, dest].add(he.reshape(rows, -1)[:, idx])
+        g = np.asarray(gfull)[:, ref.free_dofs]
+        hv = np.asarray(hv)
+        n = ref.n_free
+        return [(g[r], sp.csc_matrix((hv[r], ref._indices, ref._indptr), shape=(n, n)))
+                for r in range(rows)]
 
     def merit(self, runs: Sequence[int], X: np.ndarray, dX: np.ndarray
               ) -> list[tuple[float, float]]:

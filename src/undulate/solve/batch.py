@@ -208,7 +208,8 @@ def release_batch(cases: Sequence[Case],
         finally:
             rv.leave(b)
 
-    threads = [threading.Thread(target=work, args=(b,), name=f"undulate-run-{b}")
+    # daemon threads: an interrupted caller (Ctrl-C in join) can exit without waiting for them
+    threads = [threading.Thread(target=work, args=(b,), name=f"undulate-run-{b}", daemon=True)
                for b in range(n)]
     for t in threads:
         t.start()
