@@ -117,6 +117,24 @@ def test_batched_release_reports_each_runs_failure_and_finishes_the_others(
     assert res[1].step is not None and res[1].residual is not None
 
 
+def test_batched_release_of_runs_that_all_fail_early_returns_their_errors(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every run fails before the batch is built: their errors come back, and no thread
+    dies of an exception of its own (the last one to leave has nothing to build from)."""
+    import threading
+
+    from undulate.solve.batch import release_batch
+    from undulate.solve.newton import ConvergenceError
+
+    died: list = []
+    monkeypatch.setattr(threading, "excepthook", died.append)
+    bad = case_from_dict({**RELEASE, "solver": {"max_iter": 1}})
+    res = release_batch([bad, bad])
+    assert all(isinstance(r, ConvergenceError) and str(r).startswith("pre-stretch")
+               for r in res)
+    assert died == []
+
+
 def test_batched_release_refuses_runs_of_another_mesh() -> None:
     from undulate.solve.batch import release_batch
 

@@ -73,8 +73,9 @@ class _Rendezvous:
         return BatchMember(asm, self, b)
 
     def _maybe_build(self) -> None:
-        if self.batch is not None or any(self.asms[b] is None for b in self.live):
-            return
+        if (self.batch is not None or all(a is None for a in self.asms)
+                or any(self.asms[b] is None for b in self.live)):
+            return  # built, nothing to build from (every run failed early), or runs to wait for
         # runs that failed before registering leave no assembly: the batch keeps one row
         # per run index, filled with a registered run's assembly
         first = next(a for a in self.asms if a is not None)
