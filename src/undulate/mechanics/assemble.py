@@ -61,6 +61,10 @@ class ElementGroup:
     nodes: np.ndarray  # (n_el, k) int
     params: tuple[np.ndarray, ...]  # each (n_el, ...)
     chunk: int = 0  # elements per kernel call (0: all of them, at most CALL_CAP); fixed shapes
+    #: where the elements sit among per-node frames shared with other groups (the rods:
+    #: :class:`undulate.mechanics.frames.FrameSlots`); the Assembly then makes the Hessian of
+    #: all groups on one layout through the frames, once per node (None: element by element)
+    frames: object | None = None
 
     def __post_init__(self) -> None:
         self.nodes = np.asarray(self.nodes, dtype=np.int64)
@@ -487,6 +491,17 @@ class Assembly:
         dof_map[self.free_dofs] = np.arange(self.n_free)
         self._dof_map = dof_map
         self._build_pattern()
+        from .frames import fused_frame_sets
+
+        #: strain-form groups on shared frames, whose Hessian is made through the frames
+        #: (:mod:`undulate.mechanics.frames`); empty: every group element by element
+        self.fused = fused_frame_sets(self)
+        self._fused_groups = {i for f in self.fused for i in f.indices}
+        if self.fused:
+            offs = np.concatenate([[0], np.cumsum([np.count_nonzero(k) for k in self._keep])])
+            self._scatter_fused = np.concatenate(
+                [self._scatter[offs[i] : offs[i + 1]] for i in range(len(self.groups))
+                 if i not in self._fused_groups] + [f.positions for f in self.fused])
 
     # ------------------------------------------------------------------ pattern
     def _build_pattern(self) -> None:
@@ -576,10 +591,13 @@ class Assembly:
         xj = jnp.asarray(x)
         return self.gradient_from([self.joined(g, g.run("grad", xj)) for g in self.groups])
 
-    def gradient_from(self, ges: Sequence[np.ndarray]) -> np.ndarray:
-        """Gradient (n_nodes, 3) from the groups' element gradients, summed in group order."""
+    def gradient_from(self, ges: Sequence[np.ndarray], which: Sequence[int] | None = None
+                      ) -> np.ndarray:
+        """Gradient (n_nodes, 3) from the groups' element gradients (of all groups, or of the
+        groups ``which``), summed in group order."""
         gfull = np.zeros((self.n_nodes, 3))
-        for g, ge in zip(self.groups, ges, strict=True):
+        groups = self.groups if which is None else [self.groups[i] for i in which]
+        for g, ge in zip(groups, ges, strict=True):
             self._scatter_nodes(g, ge, gfull)
         return gfull
 
@@ -597,21 +615,41 @@ class Assembly:
         xj = jnp.asarray(x)
         mixed = set(self.mixed_groups)
 
+        def stress_of(i: int) -> np.ndarray:
+            return stress[i] if stress is not None and i in stress else self._stress(i, xj)
+
         def one(i: int) -> tuple[np.ndarray, np.ndarray]:
             g, keep = self.groups[i], self._keep[i]
             if i in mixed:
                 # the consistent pair is the mixed one at the stresses k e(x): one compiled
                 # program serves both (each costs a new process ~0.4 s to load for the rods)
-                s = stress[i] if stress is not None and i in stress else self._stress(i, xj)
-                outs = g.run("grad_hess_mixed", xj, per_element=s)
+                outs = g.run("grad_hess_mixed", xj, per_element=stress_of(i))
             else:
                 outs = g.run("grad_hess", xj)
             return self.joined(g, [o[0] for o in outs]), \
                 self.joined(g, [o[1] for o in outs]).ravel()[keep]
 
-        # the groups' kernels run side by side on the machine's cores (JAX releases the GIL);
-        # results are summed in group order afterwards, so the sum does not depend on timing
-        return self.grad_hess_from(list(_pool().map(one, range(len(self.groups)))))
+        if not self.fused:
+            # the groups' kernels run side by side on the machine's cores (JAX releases the
+            # GIL); results are summed in group order afterwards, so the sum does not depend
+            # on timing
+            return self.grad_hess_from(list(_pool().map(one, range(len(self.groups)))))
+        own = [i for i in range(len(self.groups)) if i not in self._fused_groups]
+
+        def task(k: int):
+            if k < len(own):
+                return one(own[k])
+            f = self.fused[k - len(own)]
+            return f.run(xj, [stress_of(i) for i in f.indices])
+
+        parts = list(_pool().map(task, range(len(own) + len(self.fused))))
+        gfull = self.gradient_from([p[0] for p in parts[: len(own)]], own)
+        for gr, _ in parts[len(own):]:
+            gfull += gr
+        v = np.concatenate([p[1] for p in parts])
+        data = np.bincount(self._scatter_fused, weights=v, minlength=self.nnz)
+        H = sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n_free, self.n_free))
+        return gfull.ravel()[self.free_dofs], H
 
     def grad_hess_from(self, parts: Sequence[tuple[np.ndarray, np.ndarray]]
                        ) -> tuple[np.ndarray, sp.csc_matrix]:

@@ -19,9 +19,11 @@ from .fabric import (
     dead_load,
     hinge_bending,
 )
+from .frames import FrameLayout, FrameSlots
 from .material import FabricLaw, NeoHookean, OrthotropicSVK, fabric_law, lame_plane_stress
 from .rod import (
     edge_length,
+    frame_point,
     node_strains,
     rod_bend_twist,
     rod_footprint,
@@ -191,6 +193,10 @@ def rod_groups(
         return np.array([getattr(q, name) for q in secs_], dtype=float)
 
     stencils = [rod_stencils(ch) for ch in chains]
+    # every rod node's frame is read by the edges and vertices around it: the Hessian is made
+    # through the frames, once per node (undulate.mechanics.frames)
+    layout = FrameLayout(np.concatenate(stencils), frame_point)
+    start = np.cumsum([len(st) for st in stencils]) - np.array([len(st) for st in stencils])
     e_idx = [np.concatenate([st[:-1], st[1:]], axis=1) for st in stencils]  # (m-1, 10) each
     e_sec = [sk for st, sk in zip(stencils, secs, strict=True) for _ in range(len(st) - 1)]
     e_all = np.concatenate(e_idx)
@@ -212,7 +218,10 @@ def rod_groups(
         lnk[1:] += 0.5 * le
         ln.append(lnk)
 
-    groups = [ElementGroup("rod_stretch", rod_stretch, e_all, (d_e, L0, col(e_sec, "EA")))]
+    e_first = np.concatenate([s0 + np.arange(len(st) - 1)
+                              for s0, st in zip(start, stencils, strict=True)])
+    groups = [ElementGroup("rod_stretch", rod_stretch, e_all, (d_e, L0, col(e_sec, "EA")),
+                           frames=FrameSlots(layout, e_first))]
     if v_idx:
         v_all = np.concatenate(v_idx)
         d_v = col(v_sec, "offset")
@@ -224,6 +233,9 @@ def rod_groups(
                 v_all,
                 (d_v, rest, np.concatenate(lv), col(v_sec, "EI_out"), col(v_sec, "EI_in"),
                  col(v_sec, "GJ")),
+                frames=FrameSlots(layout, np.concatenate(
+                    [s0 + np.arange(len(st) - 2) for s0, st in zip(start, stencils, strict=True)
+                     if len(st) >= 3])),
             )
         )
     n_all = np.concatenate(n_idx)
