@@ -23,7 +23,7 @@ with ``J_k = dq_k / dx``, ``gq_k`` and ``B`` the summed frame-space gradients an
 blocks of the elements, and ``c_k`` the frame-space forces of the geometric term (the carried
 stresses of the mixed Newton where it carries them, as element by element). The numbers are
 those of the element-by-element assembly to roundoff (``tests/test_frames.py``); the rod part
-of one Hessian costs about a quarter of the time (measured in docs/benchmarks.md).
+of one Hessian costs a quarter to a third of the time (docs/benchmarks.md, thirteenth pass).
 
 The per-element and per-node derivatives run in chunks of :data:`CHUNK` rows (``lax.map`` over
 ``vmap``-ed chunks): XLA on the CPU runs a small batch of these small Hessians several times
