@@ -53,6 +53,8 @@ def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
     good = next(r for r in recs.values() if r["status"] == "ok")
     assert good["record"]["n_mode"] >= 1 and good["seed"] == 0 and good["attempt"] == 1
     assert good["elapsed_s"] >= 0 and good["case"]["rods"]["h"] in (0.2, 0.6)
+    # CPU time of the run's process: recorded, and not more than its threads could spend
+    assert 0 <= good["cpu_s"] <= good["elapsed_s"] * 64 + 1.0
     # which engine ran it (digest of the source) and on how many cores
     from undulate.study.runner import engine_id
 
@@ -192,7 +194,7 @@ def test_collect_table(tmp_path: Path) -> None:
     df = collect(tmp_path)
     assert len(df) == 12
     for col in ("run_id", "status", "seed", "rods.h", "rods.s", "h", "s", "N", "eps0", "l_mean",
-                "family", "elapsed_s", "error"):
+                "family", "elapsed_s", "cpu_s", "error"):
         assert col in df, col
     s0 = df[df["rods.s"] == 0.0]
     assert (s0["N"] == 1).all() and (s0["b"] == 5.0).all()
@@ -257,6 +259,19 @@ def test_report_counts_runs_per_engine_old_records_included() -> None:
                        "engine": [None, "abc123def456", "abc123def456"]})
     line = next(t for t in _cost_lines(df) if t.startswith("| engine"))
     assert "abc123def456: 2" in line and "(not recorded): 1" in line
+    assert not any("CPU" in t for t in _cost_lines(df))  # none recorded: no CPU lines
+
+
+def test_report_sums_cpu_times_where_recorded() -> None:
+    """The cost section adds the runs' CPU times (records without one are left out of it)."""
+    from undulate.study.report import _cost_lines
+
+    df = pd.DataFrame({"status": ["ok", "ok", "ok"], "elapsed_s": [10.0, 20.0, 30.0],
+                       "cpu_s": [None, 1800.0, 5400.0]})
+    lines = _cost_lines(df)
+    assert "| runs with CPU time recorded | 2 |" in lines
+    assert "| sum of CPU times [h] | 2.00 |" in lines
+    assert any(t.startswith("| median / max CPU time per run [s] | 3600.0 / 5400.0") for t in lines)
 
 
 def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monkeypatch

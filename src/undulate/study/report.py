@@ -155,6 +155,14 @@ def _cost_lines(df: pd.DataFrame) -> list[str]:
            f"| runs timed | {len(el)} |",
            f"| sum of run times [min] | {_f(el.sum() / 60.0, '.1f')} |",
            f"| median / max run time [s] | {_f(el.median(), '.1f')} / {_f(el.max(), '.1f')} |"]
+    if "cpu_s" in df:
+        # CPU time of the runs' processes: what a run costs, whatever else shared the machine
+        cpu = pd.to_numeric(df["cpu_s"], errors="coerce").dropna()
+        if not cpu.empty:
+            out += [f"| runs with CPU time recorded | {len(cpu)} |",
+                    f"| sum of CPU times [h] | {_f(cpu.sum() / 3600.0, '.2f')} |",
+                    f"| median / max CPU time per run [s] | {_f(cpu.median(), '.1f')} / "
+                    f"{_f(cpu.max(), '.1f')} |"]
     if "started" in df and "finished" in df:
         t0 = pd.to_datetime(df["started"], errors="coerce", utc=True).min()
         t1 = pd.to_datetime(df["finished"], errors="coerce", utc=True).max()

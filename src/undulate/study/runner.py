@@ -99,11 +99,14 @@ def execute_run(
     """Run one case in the current process; never raises for a failing run.
 
     Returns ``{"status", "record", "error", "traceback", "case_resolved", "started",
-    "finished", "elapsed_s", "host", "pid", "engine", "cpus"}``. This is what worker processes
-    / dask tasks execute.
+    "finished", "elapsed_s", "cpu_s", "host", "pid", "engine", "cpus"}``. ``cpu_s`` is the CPU
+    time of this process (all its threads) during the run: unlike the wall time it does not
+    grow while the machine is busy with something else or the worker is stopped. This is
+    what worker processes / dask tasks execute.
     """
     started = _now()
     t0 = time.perf_counter()
+    c0 = time.process_time()
     result: dict[str, Any] = {"record": None, "error": None, "traceback": None}
     try:
         from undulate.model import case_from_dict
@@ -132,6 +135,7 @@ def execute_run(
         started=started,
         finished=_now(),
         elapsed_s=round(time.perf_counter() - t0, 6),
+        cpu_s=round(time.process_time() - c0, 6),
         host=socket.gethostname(),
         pid=os.getpid(),
         engine=engine_id(),
@@ -192,7 +196,8 @@ def execute_batch(
 ) -> list[dict[str, Any]]:
     """Run cases that share a topology together (:func:`undulate.api.run_cases`, the engine's
     batched release) in the current process; one result per case, as :func:`execute_run`
-    gives (``elapsed_s``: the batch's wall time shared equally; ``batch``: its size). A
+    gives (``elapsed_s``, ``cpu_s``: the batch's wall and CPU time shared equally; ``batch``:
+    its size). A
     custom runner, a single case, or cases that turn out not to share a mesh run one by one.
     """
     if runner is not None or len(case_dicts) <= 1:
@@ -200,6 +205,7 @@ def execute_batch(
                                                                     strict=True)]
     started = _now()
     t0 = time.perf_counter()
+    c0 = time.process_time()
     from undulate.api import run_cases
     from undulate.model import case_from_dict
 
@@ -237,8 +243,10 @@ def execute_batch(
         else:
             results[k].update(status="ok", record=jsonable(rec))
     wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0
     for res in results:
         res.update(started=started, finished=_now(), elapsed_s=round(wall / len(results), 6),
+                   cpu_s=round(cpu / len(results), 6),
                    batch=len(results), host=socket.gethostname(), pid=os.getpid(),
                    engine=engine_id(), cpus=usable_cpus())
     return results
@@ -463,6 +471,7 @@ def run_study(
             "started": res.get("started"),
             "finished": res.get("finished"),
             "elapsed_s": res.get("elapsed_s"),
+            "cpu_s": res.get("cpu_s"),
             "host": res.get("host"),
             "pid": res.get("pid"),
             "engine": res.get("engine"),
@@ -642,7 +651,8 @@ def _crash_result(error: str, local: bool = True) -> dict[str, Any]:
     # a local worker that died ran this process's code: its engine and cores are ours (a
     # remote, dask, worker's are unknown)
     return {"status": "failed", "record": None, "error": error, "traceback": None,
-            "started": None, "finished": now, "elapsed_s": None, "host": None, "pid": None,
+            "started": None, "finished": now, "elapsed_s": None, "cpu_s": None, "host": None,
+            "pid": None,
             "engine": engine_id() if local else None, "cpus": usable_cpus() if local else None}
 
 

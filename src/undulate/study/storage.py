@@ -193,7 +193,8 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     for key, value in (rec.get("record") or {}).items():
         col = key if key not in row else f"rec_{key}"
         row[col] = json.dumps(value) if isinstance(value, list | dict) else value
-    for key in ("error", "elapsed_s", "started", "finished", "attempt", "host", "cpus", "engine"):
+    for key in ("error", "elapsed_s", "cpu_s", "started", "finished", "attempt", "host", "cpus",
+                "engine"):
         row[key] = rec.get(key)
     return row
 
@@ -204,7 +205,8 @@ def collect(study_dir: Path, *, only_study: bool = True) -> pd.DataFrame:
     Columns: ``run_id``, ``status``, ``seed``; the swept parameters by dotted path
     (e.g. ``rods.h``); short aliases of the effective case (``h b L N s E_B eps0 E t margin_y``,
     after the s = 0 single-rod rule); every field of the engine's record (a name that collides
-    gets a ``rec_`` prefix; lists/dicts as JSON strings); ``error``, ``elapsed_s``, ``started``,
+    gets a ``rec_`` prefix; lists/dicts as JSON strings); ``error``, ``elapsed_s``, ``cpu_s``
+    (CPU time of the run's process; empty in records written before it was kept), ``started``,
     ``finished``, ``attempt``, ``host``, ``cpus`` (cores the run could use), ``engine`` (digest
     of the engine that ran it, :func:`undulate.study.runner.engine_id`; empty for records
     written before it was kept). With ``only_study`` and a ``study.json`` present, only
