@@ -18,6 +18,7 @@ from undulate.study.derived import (
     hstar_ratios,
     ok_rows,
     onset_summary,
+    outer_rod_first,
     theory,
 )
 from undulate.study.figures import make_figures
@@ -103,7 +104,8 @@ def test_parallel_figures_hstar_and_bundling(parallel: Path) -> None:
     assert ratios[0]["bundling"] == pytest.approx(5 ** (1 / 3))
     assert ratios[0]["N"] == 5
     text = write_report(parallel).read_text()
-    for name in ("phase_diagram", "master_curve", "quantized_flattening"):
+    for name in ("phase_diagram", "master_curve", "quantized_flattening", "transitions",
+                 "onset_map"):
         assert (parallel / "figures" / f"{name}.png").is_file()
         assert f"figures/{name}.png" in text
     ons = onset_summary(df)
@@ -111,6 +113,15 @@ def test_parallel_figures_hstar_and_bundling(parallel: Path) -> None:
     assert "Onset of buckling" in text and "in 8 of 8 runs" in text
     assert not (parallel / "figures" / "single_rod_h.png").exists()
     assert "| 3->1 |" in text and "N^(1/3)" in text and "figures/phase_diagram.png" in text
+    assert "h*(s_max) / h*(s_min)" in text and "N^(-1/3) = 0.585" in text
+
+
+def test_outer_rod_first_reads_lists_and_table_text() -> None:
+    assert outer_rod_first([0.10, 0.12, 0.13, 0.12, 0.11]) is True
+    assert outer_rod_first("[0.12, 0.10, 0.13, 0.12, 0.12]") is False
+    assert outer_rod_first([0.1, 0.2]) is None  # fewer than three rods
+    assert outer_rod_first([0.1, None, 0.2]) is None
+    assert outer_rod_first("not a list") is None
 
 
 def test_linear_regime_stops_at_first_single_arch() -> None:

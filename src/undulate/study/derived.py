@@ -26,6 +26,7 @@ __all__ = [
     "arcs_beat_sines",
     "hstar_ratios",
     "onset_summary",
+    "outer_rod_first",
 ]
 
 
@@ -209,6 +210,19 @@ def hstar_ratios(df: pd.DataFrame, n_nominal: int | None = None) -> list[dict[st
     return out
 
 
+def outer_rod_first(rods_onset: Any) -> bool | None:
+    """Whether an outer rod (first or last) reached the onset of buckling no later than every
+    inner one, from a run's per-rod onsets (a list, or its JSON text as in the study table).
+    None for fewer than three rods, a rod without an onset, or text that is not a list."""
+    try:
+        rods = json.loads(rods_onset) if isinstance(rods_onset, str) else list(rods_onset)
+    except (TypeError, ValueError):
+        return None
+    if not isinstance(rods, list) or len(rods) < 3 or any(v is None for v in rods):
+        return None
+    return bool(min(rods[0], rods[-1]) <= min(rods[1:-1]))
+
+
 def onset_summary(df: pd.DataFrame) -> dict[str, Any] | None:
     """The onset of buckling over a study: ``n``, ``min``, ``median``, ``max`` of
     ``onset_release_strain``, and for runs of three or more rods ``outer_first`` / ``n_multi``:
@@ -224,14 +238,11 @@ def onset_summary(df: pd.DataFrame) -> dict[str, Any] | None:
                            "median": float(e.median()), "max": float(e.max())}
     outer = multi = 0
     for text in d.get("rods_onset_release_strain", pd.Series(dtype=object)).dropna():
-        try:
-            rods = json.loads(str(text))
-        except ValueError:
-            continue
-        if len(rods) < 3 or any(v is None for v in rods):
+        first = outer_rod_first(text)
+        if first is None:
             continue
         multi += 1
-        outer += int(min(rods[0], rods[-1]) <= min(rods[1:-1]))
+        outer += int(first)
     if multi:
         out.update(outer_first=outer, n_multi=multi)
     return out

@@ -6,7 +6,11 @@ Only the figures whose data exist are made:
 2. ``l_vs_eps0``: l vs eps0, log-log, with eq. (1) (eps0 swept);
 3. ``phase_diagram``: (h, s) coloured by family, s_hat from data (dashed) and formula (solid);
 4. ``master_curve``: l (mean +- std over rods) vs h/h*, L/n marks, inset h* vs s;
-5. ``quantized_flattening``: a and lambda vs h across the quantization plateaus.
+5. ``quantized_flattening``: a and lambda vs h across the quantization plateaus;
+6. ``onset``: onset of buckling vs h (single rods);
+7. ``transitions``: the thicknesses h*_n of the transitions n+2 -> n vs s, with eq. (1)'s
+   bundling (h and s swept);
+8. ``onset_map``: onset of buckling over (h, s), and whether an outer rod went first.
 
 Matplotlib's object API is used (no pyplot), so no display or backend is needed.
 """
@@ -20,7 +24,16 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from .derived import hstar, is_swept, material, n_values, ok_rows, per_point, theory
+from .derived import (
+    hstar,
+    is_swept,
+    material,
+    n_values,
+    ok_rows,
+    outer_rod_first,
+    per_point,
+    theory,
+)
 from .storage import collect
 
 __all__ = ["make_figures", "FIGURES"]
@@ -322,6 +335,70 @@ def fig_quantized_flattening(df: pd.DataFrame, outdir: Path, n_max: int = 9) -> 
     return _save(fig, outdir, "quantized_flattening")
 
 
+def fig_transitions(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
+    """h*_n(s) for the transitions 3 -> 1, 5 -> 3, 7 -> 5 (the smallest h whose final n is
+    <= n), and eq. (1)'s bundling: close rods act as one rod N times as wide, whose h*_n is
+    h*_n(s_max) / N^(1/3)."""
+    d = ok_rows(df)
+    if d.empty or not (is_swept(d, "h") and is_swept(d, "s")):
+        return None
+    N = int(d["N"].max()) if "N" in d else 5
+    fig = Figure(figsize=(6.5, 4.5), layout="constrained")
+    ax = fig.subplots()
+    drawn = False
+    for n_to, color in zip((1, 3, 5), ("tab:orange", "tab:blue", "tab:green"), strict=True):
+        hs = hstar(d, n_to)
+        if not np.isfinite(hs.to_numpy(float)).any():
+            continue
+        drawn = True
+        ax.plot(hs.index, hs.to_numpy(float), "o-", ms=4, color=color,
+                label=f"h* of {n_to + 2} → {n_to}")
+        far = float(hs.iloc[-1])
+        if np.isfinite(far):
+            ax.axhline(far / N ** (1 / 3), color=color, ls="--", lw=1,
+                       label=f"{n_to + 2} → {n_to}, bundled: h*(s = {hs.index[-1]:g}) / N^(1/3)")
+    if not drawn:
+        return None
+    dh = float(np.diff(np.sort(d["h"].unique())).min())
+    ax.set_xlabel("gap s [mm]")
+    ax.set_ylabel("transition thickness h* [mm]")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(f"Transitions vs gap (N = {N}; h* known to the sweep's step, {dh:g} mm)")
+    return _save(fig, outdir, "transitions")
+
+
+def fig_onset_map(df: pd.DataFrame, outdir: Path) -> list[Path] | None:
+    """Onset of buckling over (h, s) (release strain, colour), and which rods went first:
+    filled where an outer rod reached the onset no later than every inner one, a cross
+    where an inner rod went first."""
+    d = ok_rows(df)
+    if (d.empty or not (is_swept(d, "h") and is_swept(d, "s"))
+            or "onset_release_strain" not in d):
+        return None
+    e = _num(d, "onset_release_strain")
+    if e.notna().sum() == 0:
+        return None
+    first = d.get("rods_onset_release_strain", pd.Series(None, d.index)).map(outer_rod_first)
+    fig = Figure(figsize=(7, 5.5), layout="constrained")
+    ax = fig.subplots()
+    sc = ax.scatter(d["h"], d["s"], c=e, s=40, marker="s", cmap="viridis", edgecolors="none")
+    fig.colorbar(sc, ax=ax, label="release strain at the onset [-]")
+    inner = first.eq(False).to_numpy()
+    if inner.any():
+        ax.scatter(d["h"][inner], d["s"][inner], marker="x", c="r", s=25,
+                   label="an inner rod went first")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.12))
+    ax.set_xlabel("rod thickness h [mm]")
+    ax.set_ylabel("gap s [mm]")
+    n_multi = int(first.notna().sum())
+    n_outer = int(first.eq(True).sum())
+    ax.set_title(f"Onset of buckling (deflection > h); outer rod first in {n_outer} of "
+                 f"{n_multi} runs", fontsize=10)
+    return _save(fig, outdir, "onset_map")
+
+
 FIGURES = {
     "single_rod_h": fig_single_rod_h,
     "l_vs_eps0": fig_l_vs_eps0,
@@ -329,6 +406,8 @@ FIGURES = {
     "master_curve": fig_master_curve,
     "quantized_flattening": fig_quantized_flattening,
     "onset": fig_onset,
+    "transitions": fig_transitions,
+    "onset_map": fig_onset_map,
 }
 
 

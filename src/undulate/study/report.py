@@ -120,15 +120,21 @@ def build_report(
         lines += [
             f"**Bundling**: h*_n(s = {_f(r0['s_min'])}) / h*_n(s = {_f(r0['s_max'])}) "
             f"vs N^(1/3) = {_f(r0['bundling'], '.3f')} (N = {r0['N']}); "
-            "h*_n = smallest h whose median n over seeds is <= n_target.",
+            "h*_n = smallest h whose median n over seeds is <= n_target, so each h* is known "
+            "only to the sweep's step in h. Eq. (1) with the close rods taken as one rod N "
+            "times as wide (h -> h N^(1/3)) puts the bundle's transitions at thicknesses N^(1/3) "
+            "times smaller: h*(s_max) / h*(s_min) = N^(1/3), i.e. h*(s_min) / h*(s_max) = "
+            f"N^(-1/3) = {_f(1 / r0['bundling'], '.3f')}.",
             "",
-            "| transition | h*(s_min) [mm] | h*(s_max) [mm] | ratio | N^(1/3) |",
-            "|---|---|---|---|---|",
+            "| transition | h*(s_min) [mm] | h*(s_max) [mm] | h*(s_min) / h*(s_max) "
+            "| h*(s_max) / h*(s_min) | N^(1/3) |",
+            "|---|---|---|---|---|---|",
         ]
         for r in ratios:
+            inv = 1 / r["ratio"] if r["ratio"] and math.isfinite(r["ratio"]) else float("nan")
             lines.append(
                 f"| {r['transition']} | {_f(r['hstar_s_min'])} | {_f(r['hstar_s_max'])} | "
-                f"{_f(r['ratio'], '.3f')} | {_f(r['bundling'], '.3f')} |"
+                f"{_f(r['ratio'], '.3f')} | {_f(inv, '.3f')} | {_f(r['bundling'], '.3f')} |"
             )
         lines.append("")
     if not (fit or exps or arcs or ons or ratios):
