@@ -274,6 +274,22 @@ def test_report_sums_cpu_times_where_recorded() -> None:
     assert any(t.startswith("| median / max CPU time per run [s] | 3600.0 / 5400.0") for t in lines)
 
 
+def test_report_counts_the_hours_with_runs_in_progress_once() -> None:
+    """Runs in parallel count once and the gap between two sittings not at all."""
+    from undulate.study.report import _busy_hours, _cost_lines
+
+    df = pd.DataFrame({
+        "status": ["ok", "ok", "ok", "failed"],
+        "elapsed_s": [3600.0, 1800.0, 3600.0, 60.0],
+        "started": ["2026-01-01T00:00:00+00:00", "2026-01-01T00:30:00+00:00",
+                    "2026-01-02T00:00:00+00:00", None],
+        "finished": ["2026-01-01T01:00:00+00:00", "2026-01-01T01:00:00+00:00",
+                     "2026-01-02T01:00:00+00:00", "2026-01-02T01:00:00+00:00"]})
+    assert _busy_hours(df) == pytest.approx(2.0)
+    lines = _cost_lines(df)
+    assert "| ok runs per hour of it | 1.5 |" in lines
+
+
 def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monkeypatch
                                                             ) -> None:
     """The engine (a runner by name) runs in worker processes even with -j 1, so a crash

@@ -175,6 +175,12 @@ def _cost_lines(df: pd.DataFrame) -> list[str]:
         if pd.notna(t0) and pd.notna(t1):
             out.append(f"| first start -> last finish (UTC) | {t0:%Y-%m-%d %H:%M} -> "
                        f"{t1:%Y-%m-%d %H:%M} |")
+        busy = _busy_hours(df)
+        if busy > 0:
+            n_ok = int((df["status"] == "ok").sum()) if "status" in df else len(el)
+            out += [f"| time with runs in progress [h] (sittings joined, gaps left out) | "
+                    f"{_f(busy, '.2f')} |",
+                    f"| ok runs per hour of it | {_f(n_ok / busy, '.1f')} |"]
     if "newton_iterations" in df:
         it = pd.to_numeric(df["newton_iterations"], errors="coerce").dropna()
         if not it.empty:
@@ -190,6 +196,28 @@ def _cost_lines(df: pd.DataFrame) -> list[str]:
             out.append("| engine(s) (source digest: runs) | "
                        + ", ".join(f"{k}: {v}" for k, v in eng.items()) + " |")
     return out + [""]
+
+
+def _busy_hours(df: pd.DataFrame) -> float:
+    """Hours during which at least one of the study's runs was in progress: the union of the
+    runs' [started, finished] intervals, so that the gaps between sittings do not count and
+    runs in parallel count once. 0 without times."""
+    t0 = pd.to_datetime(df["started"], errors="coerce", utc=True)
+    t1 = pd.to_datetime(df["finished"], errors="coerce", utc=True)
+    spans = sorted((a, b) for a, b in zip(t0, t1, strict=True)
+                   if pd.notna(a) and pd.notna(b) and b >= a)
+    total = 0.0
+    cur_a = cur_b = None
+    for a, b in spans:
+        if cur_b is None or a > cur_b:
+            if cur_b is not None:
+                total += (cur_b - cur_a).total_seconds()
+            cur_a, cur_b = a, b
+        else:
+            cur_b = max(cur_b, b)
+    if cur_b is not None:
+        total += (cur_b - cur_a).total_seconds()
+    return total / 3600.0
 
 
 def write_report(study_dir: str | Path) -> Path:
