@@ -50,6 +50,21 @@ def test_curved_budget_counts_only_steps_along_the_watched_unknowns():
                     watch=on_mode).converged
 
 
+def test_definite_start_gives_up_at_once_on_an_unstable_start():
+    """``definite_start``: a start whose Hessian has negative pivots ends before any iteration
+    (the release loop then halves its grown step); a stable start is solved as usual."""
+    asm = _pair(0.02)
+    x0 = np.zeros((2, 3))  # the saddle
+    opts = NewtonOptions(rtol=1e-10, definite_start=True)
+    res = minimize(asm, x0, asm.free(x0), opts)
+    assert not res.converged and res.unstable_start and not res.over_budget
+    assert res.iterations == 0 and "not stable" in res.message
+    x1 = x0.copy()
+    x1[0, 0], x1[1, 0] = 0.1, -0.1  # beside the minimum: positive definite
+    ok = minimize(asm, x1, asm.free(x1), opts)
+    assert ok.converged and not ok.unstable_start
+
+
 def test_neutral_mode_within_roundoff_counts_as_stable_but_not_beyond():
     asm = _pair(1e-10)  # relative lowest eigenvalue about -1e-10: a neutral mode
     x0 = np.zeros((2, 3))

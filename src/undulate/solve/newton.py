@@ -89,6 +89,9 @@ class NewtonOptions:
     #: of the ``watch`` unknowns has been taken (0: never): the release loop's budget for a
     #: grown step in which the rods' pattern changes (``release.snap_iterations``)
     curved_budget: int = 0
+    #: give up at once (``over_budget``) when the start's Hessian is not positive definite:
+    #: the release loop's rule for a grown step (``release.GROWN_STEP_DEFINITE_START``)
+    definite_start: bool = False
 
 
 @dataclass
@@ -109,6 +112,8 @@ class NewtonResult:
     watched_steps: int = 0
     #: stopped by ``opts.curved_budget`` (a change of pattern), not by max_iter or a failure
     over_budget: bool = False
+    #: stopped at once by ``opts.definite_start`` (the start's Hessian is not positive definite)
+    unstable_start: bool = False
 
 
 #: a curved step counts towards ``curved_budget`` when at least this share of its direction
@@ -281,9 +286,9 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         stress = asm.stress_linearized(x_ref, x - x_ref)
 
     def result(converged: bool, it: int, message: str = "",
-               over_budget: bool = False) -> NewtonResult:
+               over_budget: bool = False, unstable_start: bool = False) -> NewtonResult:
         return NewtonResult(u, converged, it, res, E, n_neg, neg_steps, dict(times), message,
-                            trace, watched_steps, over_budget)
+                            trace, watched_steps, over_budget, unstable_start)
 
     for it in range(opts.max_iter + 1):
         t0 = time.perf_counter()
@@ -309,6 +314,9 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             return result(True, it)
         if it == opts.max_iter:
             break
+        if opts.definite_start and it == 0 and n_neg != 0:
+            return result(False, it, f"the start is not stable ({n_neg} negative pivots)",
+                          unstable_start=True)
         if opts.curved_budget and watched_steps and it >= opts.curved_budget:
             return result(False, it, f"change of pattern: {it} iterations, {watched_steps} "
                                      f"along negative curvature of the watched unknowns "

@@ -13,8 +13,9 @@
    length ``correlation``, from ``seed``) is added under the rods.
 4. **Release.** The clamp strain goes from eps0 to ``release.final_strain`` (0: all the
    way). Quasi-static: nominal increments,
-   growing on the smooth buckled branch and cut in half (when ``adaptive``) on failure or
-   when a grown step holds a change of the rods' pattern (``snap_iterations``), each solved to
+   growing on the smooth buckled branch and cut in half (when ``adaptive``) on failure,
+   when a grown step starts from an unstable prediction, or when it holds a change of the
+   rods' pattern (``snap_iterations``), each solved to
    a *stable* equilibrium by :func:`undulate.solve.newton.minimize` from a predictor.
    Inertial: implicit damped dynamics
    (see :mod:`undulate.solve.dynamics`) with the clamps moving over ``release_time``, then
@@ -395,6 +396,16 @@ def _chord_correction(asm: Assembly, solver, x_pred: np.ndarray,
     return x_pred
 
 
+#: a grown step (longer than ``snap_resolution`` x nominal) whose predicted start is not
+#: positive definite is taken again in halves at once, before any Newton iteration: a start
+#: with negative pivots means the step jumps past a loss of stability (of the rods' pattern or
+#: of the slack fabric), which the snap budget would otherwise find only after following the
+#: fabric's wrinkles for tens of iterations. Measured (`benchmarks/bench_engine.py`, same
+#: states in every case): demo 225 -> 175 Newton iterations, five-0.5-10 169 -> 116,
+#: five-0.1-0 267 -> 236, single-0.3 241 -> 220; single-0.08, five-0.1-50 unchanged;
+#: five-2-50 364 -> 377.
+GROWN_STEP_DEFINITE_START = True
+
 #: a release step that converged in at most this many Newton iterations, none of them along
 #: negative curvature, lets the next increment grow
 EASY_STEP_ITERATIONS = 5
@@ -431,8 +442,11 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
     solver = make_solver(opts.linear_solver)
     rng = np.random.default_rng(sim.case.imperfection.seed + 1)
     history: list[dict] = []
-    snap_opts = replace(opts, curved_budget=rel.snap_iterations)
+    snap_opts = replace(opts, curved_budget=rel.snap_iterations,
+                        definite_start=GROWN_STEP_DEFINITE_START)
+    snap_opts_last = replace(snap_opts, definite_start=False)
     totals = dict(newton_iterations=0, negative_curvature_steps=0, step_cuts=0, snap_cuts=0,
+                  unstable_start_cuts=0,
                   assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0, line_search_time_s=0.0)
     rod_nodes = [np.concatenate([ch.p, ch.qp, ch.qm]) for ch in sim.mesh.rods]
     on_rod = np.zeros(sim.mesh.n_nodes, dtype=bool)
@@ -475,7 +489,11 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # again in halves (below), so the change starts from just past the strain where the
         # old pattern ends, not from wherever a long jump lands
         long_step = rel.adaptive and (e_old - e_new) > rel.snap_resolution * de_nom * (1 + 1e-9)
-        res = minimize(asm, x_pred, asm.free(x_pred), snap_opts if long_step else opts,
+        step_opts = opts
+        if long_step:
+            # the unstable-start rule only where the step can still be halved
+            step_opts = snap_opts if (e_old - e_new) / 2 >= de_min else snap_opts_last
+        res = minimize(asm, x_pred, asm.free(x_pred), step_opts,
                        solver=solver, rng=rng, x_ref=x, watch=watch)
         totals["newton_iterations"] += res.iterations
         totals["negative_curvature_steps"] += res.negative_steps
@@ -491,6 +509,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
                 de = (e_old - e_new) / 2
                 totals["step_cuts"] += 1
                 totals["snap_cuts"] += int(res.over_budget)
+                totals["unstable_start_cuts"] += int(res.unstable_start)
                 steps.append((e_old, e_old - de))
                 continue
             raise ConvergenceError(
