@@ -284,10 +284,12 @@ def test_report_counts_the_hours_with_runs_in_progress_once() -> None:
         "started": ["2026-01-01T00:00:00+00:00", "2026-01-01T00:30:00+00:00",
                     "2026-01-02T00:00:00+00:00", None],
         "finished": ["2026-01-01T01:00:00+00:00", "2026-01-01T01:00:00+00:00",
-                     "2026-01-02T01:00:00+00:00", "2026-01-02T01:00:00+00:00"]})
+                     "2026-01-02T01:00:00+00:00", "2026-01-02T01:00:00+00:00"],
+        "cpus": [2, 2, 16, None]})
     assert _busy_hours(df) == pytest.approx(2.0)
     lines = _cost_lines(df)
     assert "| ok runs per hour of it | 1.5 |" in lines
+    assert "| usable cores of the machine (cores: runs) | 2: 2, 16: 1 |" in lines
 
 
 def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monkeypatch

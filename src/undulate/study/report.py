@@ -190,6 +190,11 @@ def _cost_lines(df: pd.DataFrame) -> list[str]:
         hosts = sorted(str(h) for h in df["host"].dropna().unique())
         if hosts:
             out.append(f"| host(s) | {', '.join(hosts)} |")
+    if "cpus" in df:
+        cpus = pd.to_numeric(df["cpus"], errors="coerce").dropna().astype(int).value_counts()
+        if not cpus.empty:
+            out.append("| usable cores of the machine (cores: runs) | "
+                       + ", ".join(f"{k}: {v}" for k, v in sorted(cpus.items())) + " |")
     if "engine" in df:
         eng = df["engine"].fillna("(not recorded)").astype(str).value_counts()
         if not eng.empty:
