@@ -89,7 +89,8 @@ class NewtonOptions:
     #: of the ``watch`` unknowns has been taken (0: never): the release loop's budget for a
     #: grown step in which the rods' pattern changes (``release.snap_iterations``)
     curved_budget: int = 0
-    #: give up at once (``over_budget``) when the start's Hessian is not positive definite:
+    #: give up at once (``NewtonResult.unstable_start``) when the start's Hessian is not
+    #: positive definite:
     #: the release loop's rule for a grown step (``release.GROWN_STEP_DEFINITE_START``)
     definite_start: bool = False
 
