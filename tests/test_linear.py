@@ -95,6 +95,41 @@ def test_pardiso_several_rhs_and_new_pattern():
     np.testing.assert_allclose((U2 + sp.triu(U2, 1).T) @ s.solve(b2), b2, atol=1e-9)
 
 
+@pytest.mark.skipif(not HAVE_PARDISO, reason="MKL PARDISO not installed (extra 'fast')")
+def test_pardiso_cholesky_first_then_ldl():
+    """PARDISO factors a positive definite matrix by Cholesky and an indefinite one by LDL^T
+    (after a failed Cholesky), with the right inertia and solution either way; alternating
+    between the two on one pattern keeps both analyses."""
+    s = PardisoSolver()
+    U = upper(laplacian_2d(20))
+    A_full = U + sp.triu(U, 1).T
+    n = U.shape[0]
+    b = np.random.default_rng(3).standard_normal(n)
+    ev = np.linalg.eigvalsh(A_full.toarray())
+    for sigma in (0.0, 0.5, 0.0, 0.5):
+        K = shifted(U, sigma)
+        n_neg = s.factor(K)
+        assert n_neg == int(np.count_nonzero(ev - sigma < 0))
+        x = s.solve(b)
+        r = (A_full - sigma * sp.identity(n)) @ x - b
+        assert np.linalg.norm(r) <= 1e-8 * np.linalg.norm(b)
+    assert s.counts == {"cholesky": 2, "cholesky_failed": 2, "ldl": 2}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_is_definite(kind):
+    """The shift search's question: True (and factored for solve) for a positive definite
+    matrix, False for an indefinite or a singular one."""
+    U = upper(laplacian_2d(12))
+    A_full = U + sp.triu(U, 1).T
+    s = make_solver(kind)
+    assert linear.is_definite(s, U)
+    b = np.ones(U.shape[0])
+    np.testing.assert_allclose(A_full @ s.solve(b), b, atol=1e-9)
+    assert not linear.is_definite(s, shifted(U, 0.5))
+    assert not linear.is_definite(s, upper(sp.csc_matrix(np.ones((2, 2)))))
+
+
 @pytest.mark.parametrize("kind", ["qdldl", "splu"])
 def test_singular_raises(kind):
     U = upper(sp.csc_matrix(np.ones((2, 2))))  # rank 1: the second pivot is zero

@@ -215,22 +215,23 @@ def pardiso_available() -> bool:
     return _mkl_pardiso() is not None
 
 
-class PardisoSolver:
-    """MKL PARDISO, real symmetric indefinite (mtype -2, Bunch-Kaufman pivoting, minimum-degree
-    ordering): the analysis (phase 11) is done once per pattern, every ``factor`` is a numeric
-    refactorization (phase 22), the inertia comes from iparm(23).
+class _PardisoHandle:
+    """One MKL PARDISO instance for one matrix type: ``mtype`` -2 (real symmetric indefinite,
+    Bunch-Kaufman pivoting: LDL^T with the inertia in iparm(23)) or 2 (real symmetric positive
+    definite: Cholesky, which stops at the first non-positive pivot with error -4). The
+    analysis (phase 11, minimum-degree ordering) is done once per pattern, every ``factor`` is
+    a numeric refactorization (phase 22).
 
-    PARDISO perturbs tiny pivots (iparm(10) = 8, i.e. 1e-8 times the norm) instead of stopping;
-    any perturbed pivot (iparm(14) > 0) is reported as :class:`SingularMatrixError`, as QDLDL's
-    zero pivot is. ``solve`` takes one right-hand side (n,) or several (n, k).
+    In LDL^T mode PARDISO perturbs tiny pivots (iparm(10) = 8, i.e. 1e-8 times the norm)
+    instead of stopping; any perturbed pivot (iparm(14) > 0) is reported as
+    :class:`SingularMatrixError`, as QDLDL's zero pivot is.
     """
 
-    name = "pardiso"
-
-    def __init__(self) -> None:
+    def __init__(self, mtype: int) -> None:
         self._fn = _mkl_pardiso()
         if self._fn is None:
             raise ImportError("MKL PARDISO not found: pip install 'undulate[fast]'")
+        self._mtype = int(mtype)
         self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's opaque handle
         self._iparm = np.zeros(64, dtype=np.int32)
         # iparm(34): reproducible results for this many threads (MKL's CNR mode).
@@ -239,8 +240,8 @@ class PardisoSolver:
         # 846 Mflop per factorization, nnz(L) 3.09 M against 3.45 M; the demo 119 against 140
         # Mflop; one 5 mm rod 33 against 43; five rods at s = 10 849 against 809 (the one case
         # where METIS is lighter; same time). Measured with iparm(18), iparm(19).
-        for k, v in {1: 1, 2: 0, 10: 8, 11: 0, 13: 0, 21: 1, 34: pardiso_threads(),
-                     35: 0}.items():
+        for k, v in {1: 1, 2: 0, 10: 8, 11: 0, 13: 0, 21: 1 if mtype == -2 else 0,
+                     34: pardiso_threads(), 35: 0}.items():
             self._iparm[k - 1] = v  # 1-based numbers as in MKL's documentation
         self._key: tuple | None = None
         self._factored = False
@@ -256,7 +257,7 @@ class PardisoSolver:
         one = ctypes.c_int32(1)
         # the arrays stay referenced by self between phases: PARDISO keeps pointers to them
         self._fn(self._pt.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)), ctypes.byref(one),
-                 ctypes.byref(one), ctypes.byref(ctypes.c_int32(-2)),
+                 ctypes.byref(one), ctypes.byref(ctypes.c_int32(self._mtype)),
                  ctypes.byref(ctypes.c_int32(phase)), ctypes.byref(ctypes.c_int32(n)),
                  self._a.ctypes.data_as(f64), self._ia.ctypes.data_as(i32),
                  self._ja.ctypes.data_as(i32), self._perm.ctypes.data_as(i32),
@@ -264,7 +265,8 @@ class PardisoSolver:
                  ctypes.byref(ctypes.c_int32(0)), b.ctypes.data_as(f64), x.ctypes.data_as(f64),
                  ctypes.byref(err))
         if err.value == -4:
-            raise SingularMatrixError("PARDISO: zero pivot")
+            raise SingularMatrixError("PARDISO: zero pivot" if self._mtype == -2 else
+                                      "PARDISO: not positive definite")
         if err.value != 0:
             raise RuntimeError(f"PARDISO error {err.value}")
         return x
@@ -282,8 +284,10 @@ class PardisoSolver:
             pass
 
     def factor(self, H_upper: sp.csc_matrix) -> int:
-        """Factor; return the number of negative eigenvalues (inertia)."""
+        """Factor; return the number of negative eigenvalues (LDL^T) or 0 (Cholesky, which
+        raises :class:`SingularMatrixError` when the matrix is not positive definite)."""
         key = (H_upper.shape[0], H_upper.nnz, H_upper.indptr.tobytes(), H_upper.indices.tobytes())
+        self._factored = False
         if key != self._key:
             self._release()
             n = H_upper.shape[0]
@@ -302,18 +306,66 @@ class PardisoSolver:
             self._key = key
         else:
             self._a[:] = H_upper.data[self._to_csr]
-        self._factored = False
         self._call(22)
         if not np.all(np.isfinite(self._a)) or self._iparm[13] > 0:
             raise SingularMatrixError(f"PARDISO perturbed {self._iparm[13]} pivots")
         self._factored = True
-        return int(self._iparm[22])
+        return int(self._iparm[22]) if self._mtype == -2 else 0
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         assert self._factored
         b = np.asarray(b, dtype=np.float64)
         x = self._call(33, np.asfortranarray(b.reshape(b.shape[0], -1)))
         return np.ascontiguousarray(x).reshape(b.shape)
+
+
+class PardisoSolver:
+    """MKL PARDISO: Cholesky first, LDL^T (Bunch-Kaufman pivoting, with the inertia) when the
+    matrix is not positive definite.
+
+    Most Hessians of a release are positive definite (every converging Newton step, every
+    accepted shift), and PARDISO's Cholesky refactorization of them costs about 60 % of its
+    symmetric indefinite one (demo's Hessian, 4,836 unknowns: 3.8 against 6.2 ms; five rods at
+    s = 50, 21,063 unknowns: 22.6 against 34-37 ms), while a matrix that is not stops early
+    (0.6 and 2.1 ms measured). So ``factor`` tries Cholesky and falls back to LDL^T, whose
+    factorization then serves ``solve`` and whose inertia is returned; ``is_definite`` (the
+    shift search's question) tries Cholesky only. ``solve`` takes one right-hand side (n,) or
+    several (n, k).
+    """
+
+    name = "pardiso"
+
+    def __init__(self) -> None:
+        self._ldl = _PardisoHandle(-2)
+        self._chol = _PardisoHandle(2)
+        self._active: _PardisoHandle | None = None
+        #: factorizations by kind (Cholesky, Cholesky that failed, LDL^T)
+        self.counts = {"cholesky": 0, "cholesky_failed": 0, "ldl": 0}
+
+    def is_definite(self, H_upper: sp.csc_matrix) -> bool:
+        """True when Cholesky succeeds (its factorization then serves ``solve``)."""
+        self._active = None
+        try:
+            self._chol.factor(H_upper)
+        except SingularMatrixError:
+            self.counts["cholesky_failed"] += 1
+            return False
+        self.counts["cholesky"] += 1
+        self._active = self._chol
+        return True
+
+    def factor(self, H_upper: sp.csc_matrix) -> int:
+        """Factor; return the number of negative eigenvalues (inertia)."""
+        if self.is_definite(H_upper):
+            return 0
+        n_neg = self._ldl.factor(H_upper)
+        self.counts["ldl"] += 1
+        self._active = self._ldl
+        return n_neg
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        assert self._active is not None
+        return self._active.solve(b)
 
 
 #: ``auto``'s size thresholds (unknowns), measured on the project's Hessians (docs/benchmarks.md,
@@ -373,6 +425,24 @@ class AutoSolver:
     def solve(self, b: np.ndarray) -> np.ndarray:
         assert self._choice is not None
         return self._choice.solve(b)
+
+    def is_definite(self, H_upper: sp.csc_matrix) -> bool:
+        if self._choice is None:
+            self._choice = _KINDS[auto_choice(H_upper.shape[0])]()
+        return is_definite(self._choice, H_upper)
+
+
+def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
+    """Whether ``solver`` finds ``H_upper`` positive definite, leaving it factored for
+    ``solve`` when it is: the solver's own test where it has one (PARDISO's Cholesky), else
+    its factorization's inertia. A singular matrix is not."""
+    own = getattr(solver, "is_definite", None)
+    if own is not None:
+        return bool(own(H_upper))
+    try:
+        return solver.factor(H_upper) == 0
+    except SingularMatrixError:
+        return False
 
 
 def make_solver(kind: str = "auto") -> LDLSolver | LUSolver | PardisoSolver | AutoSolver:

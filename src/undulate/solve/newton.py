@@ -44,7 +44,7 @@ from scipy.linalg import eigh
 from scipy.sparse.linalg import LinearOperator, lobpcg
 
 from ..mechanics.assemble import Assembly
-from .linear import SingularMatrixError, make_solver
+from .linear import SingularMatrixError, is_definite, make_solver
 
 __all__ = ["NewtonOptions", "NewtonResult", "ConvergenceError", "minimize"]
 
@@ -450,11 +450,8 @@ def _shift_until_definite(asm: Assembly, solver, H: sp.csc_matrix, S: np.ndarray
         if tau > -floor:
             K = H.copy()
             K.data[asm.diag_pos] += tau * S
-            try:
-                if solver.factor(K) == 0:
-                    return tau
-            except SingularMatrixError:
-                pass
+            if is_definite(solver, K):
+                return tau
         tau *= 10.0
         if tau > 1e12:
             raise ConvergenceError("could not make the Hessian positive definite", residual=res)
