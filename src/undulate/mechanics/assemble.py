@@ -525,6 +525,7 @@ class Assembly:
         uniq, inv = np.unique(lin, return_inverse=True)
         self._scatter = inv[: rows.size - n]
         self._keep = keep_all
+        self._kept_index: dict[int, list[np.ndarray]] = {}
         self.nnz = int(uniq.size)
         ucol = uniq // n
         urow = uniq % n
@@ -619,15 +620,14 @@ class Assembly:
             return stress[i] if stress is not None and i in stress else self._stress(i, xj)
 
         def one(i: int) -> tuple[np.ndarray, np.ndarray]:
-            g, keep = self.groups[i], self._keep[i]
+            g = self.groups[i]
             if i in mixed:
                 # the consistent pair is the mixed one at the stresses k e(x): one compiled
                 # program serves both (each costs a new process ~0.4 s to load for the rods)
                 outs = g.run("grad_hess_mixed", xj, per_element=stress_of(i))
             else:
                 outs = g.run("grad_hess", xj)
-            return self.joined(g, [o[0] for o in outs]), \
-                self.joined(g, [o[1] for o in outs]).ravel()[keep]
+            return self.joined(g, [o[0] for o in outs]), self._kept(i, [o[1] for o in outs])
 
         if not self.fused:
             # the groups' kernels run side by side on the machine's cores (JAX releases the
@@ -660,6 +660,23 @@ class Assembly:
         data = np.bincount(self._scatter, weights=v, minlength=self.nnz)
         H = sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n_free, self.n_free))
         return gfull.ravel()[self.free_dofs], H
+
+    def _kept(self, i: int, chunks: Sequence) -> np.ndarray:
+        """Group ``i``'s kept Hessian entries (those ``_keep`` selects, in its order) from the
+        kernel's per-chunk element Hessians, taken chunk by chunk with integer indices: no
+        joined copy of the whole padded array and no boolean mask (five rods at s = 50, the
+        hinges' 3.05 M entries: 5.7 ms joined and masked, about 2 ms this way)."""
+        idx = self._kept_index.get(i)
+        if idx is None:
+            g, keep = self.groups[i], self._keep[i]
+            d2 = keep.size // max(g.n_el, 1)
+            idx = []
+            for s0, m in zip(g._starts, g._sizes, strict=True):
+                real = max(0, min(m, g.n_el - int(s0)))
+                idx.append(np.flatnonzero(keep[int(s0) * d2 : (int(s0) + real) * d2]))
+            self._kept_index[i] = idx
+        parts = [np.asarray(c).reshape(-1).take(ix) for c, ix in zip(chunks, idx, strict=True)]
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     @functools.cached_property
     def mixed_groups(self) -> list[int]:
