@@ -86,9 +86,11 @@ def _membrane_grad_hess(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
         dP = mu dF + lam2 (G : dF) G + (lam2 lnJ - mu) (dF C^-1 - G dF^T G - G F^T dF C^-1).
 
     F = x^T D with D (3 nodes, 2) = [-1 -1; 1 0; 0 1] Dm^-1, so node k's gradient is t A0 P D[k]
-    and the Hessian block (k, l) is t A0 sum_ab D[k, a] dP_ia/dF_jb D[l, b]. Checked against
-    autodiff of the energy in the tests; 3.4 times faster than ``jax.hessian`` of it (4,096
-    triangles: 3.5 ms against 11.8 ms, CPU).
+    and the Hessian block (k, l) is t A0 sum_ab D[k, a] dP_ia/dF_jb D[l, b], here with the
+    sums over a, b done by hand (below). Checked against autodiff of the energy in the tests;
+    3.4 times faster than ``jax.hessian`` of it with the sums as one einsum over the 4-index
+    tensor (4,096 triangles: 3.5 ms against 11.8 ms, CPU), and 2.4 times faster again with
+    them written out (14,208 triangles: 6.3 -> 2.6 ms; 3,312: 1.7 -> 0.8 ms).
     """
     D = jnp.stack([-Dm_inv[0] - Dm_inv[1], Dm_inv[0], Dm_inv[1]])
     F = x.T @ D  # (3, 2)
@@ -100,14 +102,18 @@ def _membrane_grad_hess(x: jnp.ndarray, Dm_inv: jnp.ndarray, A0: jnp.ndarray,
     c1 = lam2 * lnJ - mu
     w = t * A0
     grad = w * (D @ (mu * F + c1 * G).T)
-    I3, I2 = jnp.eye(3), jnp.eye(2)
-    A = (mu * jnp.einsum("ij,ab->iajb", I3, I2)
-         + lam2 * jnp.einsum("ia,jb->iajb", G, G)
-         + c1 * (jnp.einsum("ij,ba->iajb", I3, Ci)
-                 - jnp.einsum("ib,ja->iajb", G, G)
-                 - jnp.einsum("ij,ba->iajb", G @ F.T, Ci)))
-    H = w * jnp.einsum("ka,iajb,lb->kilj", D, A, D)
-    return grad, H.reshape(9, 9)
+    # the contraction with D written out, node pair (k, l), components (i, j):
+    # H_kilj = w [(mu P + c1 Q)_kl d_ij + lam2 g_ki g_lj - c1 g_li g_kj - c1 Q_kl M_ij]
+    # with P = D D^T, Q = D C^-1 D^T, g_k = G D[k] (rows of D G^T) and M = G F^T
+    P = D @ D.T
+    Q = D @ Ci @ D.T
+    Gd = D @ G.T
+    M = G @ F.T
+    H = ((mu * P + c1 * Q)[:, None, :, None] * jnp.eye(3)[None, :, None, :]
+         + lam2 * Gd[:, :, None, None] * Gd[None, None, :, :]
+         - c1 * jnp.einsum("li,kj->kilj", Gd, Gd)
+         - c1 * Q[:, None, :, None] * M[None, :, None, :])
+    return grad, w * H.reshape(9, 9)
 
 
 def _membrane_kernels() -> dict:
