@@ -417,19 +417,20 @@ class AutoSolver:
     def name(self) -> str:
         return f"auto:{self._choice.name}" if self._choice is not None else "auto"
 
-    def factor(self, H_upper: sp.csc_matrix) -> int:
+    def _pick(self, H_upper: sp.csc_matrix) -> LDLSolver | LUSolver | PardisoSolver:
         if self._choice is None:
             self._choice = _KINDS[auto_choice(H_upper.shape[0])]()
-        return self._choice.factor(H_upper)
+        return self._choice
+
+    def factor(self, H_upper: sp.csc_matrix) -> int:
+        return self._pick(H_upper).factor(H_upper)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         assert self._choice is not None
         return self._choice.solve(b)
 
     def is_definite(self, H_upper: sp.csc_matrix) -> bool:
-        if self._choice is None:
-            self._choice = _KINDS[auto_choice(H_upper.shape[0])]()
-        return is_definite(self._choice, H_upper)
+        return is_definite(self._pick(H_upper), H_upper)
 
 
 def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
