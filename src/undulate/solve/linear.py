@@ -13,7 +13,9 @@ case on the same installation use the same solver.
 Interface shared by all solvers: ``name``; ``factor(H_upper)`` (upper triangle, CSC; a repeated
 pattern reuses the analysis) returns the number of negative eigenvalues and raises
 :class:`SingularMatrixError` on a zero pivot; ``solve(b)`` uses the last factorization, for one
-right-hand side (n,) or a block of them (n, k).
+right-hand side (n,) or a block of them (n, k). :func:`is_definite` asks only whether a matrix
+is positive definite; :func:`factor_lazily` factors for ``solve`` without paying for the
+inertia where a solver would pay extra for it (PARDISO).
 """
 
 from __future__ import annotations
@@ -28,7 +30,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["LDLSolver", "LUSolver", "PardisoSolver", "AutoSolver", "make_solver",
-           "pardiso_available", "SingularMatrixError"]
+           "pardiso_available", "SingularMatrixError", "is_definite", "factor_lazily",
+           "NOT_COUNTED"]
+
+#: what :func:`factor_lazily` returns for a matrix that is not positive definite when its
+#: negative pivots were not counted
+NOT_COUNTED = -1
 
 
 class SingularMatrixError(RuntimeError):
@@ -326,11 +333,15 @@ class PardisoSolver:
     Most Hessians of a release are positive definite (every converging Newton step, every
     accepted shift), and PARDISO's Cholesky refactorization of them costs about 60 % of its
     symmetric indefinite one (demo's Hessian, 4,836 unknowns: 3.8 against 6.2 ms; five rods at
-    s = 50, 21,063 unknowns: 22.6 against 34-37 ms), while a matrix that is not stops early
-    (0.6 and 2.1 ms measured). So ``factor`` tries Cholesky and falls back to LDL^T, whose
-    factorization then serves ``solve`` and whose inertia is returned; ``is_definite`` (the
-    shift search's question) tries Cholesky only. ``solve`` takes one right-hand side (n,) or
-    several (n, k).
+    s = 50, 21,063 unknowns: 22.6 against 34-37 ms). A matrix that is not positive definite
+    stops the Cholesky at its first non-positive pivot, which on the wide sheets' wrinkled
+    Hessians comes late (five rods at s = 50: 23 ms against 30 ms for a whole Cholesky). So
+    ``factor`` tries Cholesky and falls back to LDL^T, whose factorization then serves
+    ``solve`` and whose inertia is returned; ``is_definite`` (the shift search's question) tries
+    Cholesky only; ``factor_lazily`` (a Newton iteration that needs only "positive definite or
+    not") leaves the LDL^T of an indefinite matrix to the first ``solve`` that needs it, and
+    skips the Cholesky as well when the caller already knows the answer. ``solve`` takes one
+    right-hand side (n,) or several (n, k).
     """
 
     name = "pardiso"
@@ -339,12 +350,15 @@ class PardisoSolver:
         self._ldl = _PardisoHandle(-2)
         self._chol = _PardisoHandle(2)
         self._active: _PardisoHandle | None = None
+        #: an indefinite matrix whose LDL^T waits for the first solve (``factor_lazily``)
+        self._pending: sp.csc_matrix | None = None
         #: factorizations by kind (Cholesky, Cholesky that failed, LDL^T)
         self.counts = {"cholesky": 0, "cholesky_failed": 0, "ldl": 0}
 
     def is_definite(self, H_upper: sp.csc_matrix) -> bool:
         """True when Cholesky succeeds (its factorization then serves ``solve``)."""
         self._active = None
+        self._pending = None
         try:
             self._chol.factor(H_upper)
         except SingularMatrixError:
@@ -358,12 +372,31 @@ class PardisoSolver:
         """Factor; return the number of negative eigenvalues (inertia)."""
         if self.is_definite(H_upper):
             return 0
+        return self._factor_ldl(H_upper)
+
+    def factor_lazily(self, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
+        """0 when ``H_upper`` is positive definite (Cholesky, kept for ``solve``), else
+        :data:`NOT_COUNTED`, its LDL^T made by the first ``solve``. ``indefinite``: the
+        caller knows H is not positive definite; no Cholesky is tried."""
+        if not indefinite and self.is_definite(H_upper):
+            return 0
+        self._active = None
+        self._pending = H_upper
+        return NOT_COUNTED
+
+    def _factor_ldl(self, H_upper: sp.csc_matrix) -> int:
+        self._active = None
+        self._pending = None
         n_neg = self._ldl.factor(H_upper)
         self.counts["ldl"] += 1
         self._active = self._ldl
         return n_neg
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        """Solve with the last factorization (a pending LDL^T is made first: it may raise
+        :class:`SingularMatrixError`)."""
+        if self._active is None and self._pending is not None:
+            self._factor_ldl(self._pending)
         assert self._active is not None
         return self._active.solve(b)
 
@@ -432,6 +465,9 @@ class AutoSolver:
     def is_definite(self, H_upper: sp.csc_matrix) -> bool:
         return is_definite(self._pick(H_upper), H_upper)
 
+    def factor_lazily(self, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
+        return factor_lazily(self._pick(H_upper), H_upper, indefinite=indefinite)
+
 
 def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
     """Whether ``solver`` finds ``H_upper`` positive definite, leaving it factored for
@@ -444,6 +480,21 @@ def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
         return solver.factor(H_upper) == 0
     except SingularMatrixError:
         return False
+
+
+def factor_lazily(solver, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
+    """Factor ``H_upper`` for ``solver.solve`` where the caller needs to know only whether it
+    is positive definite: 0 when it is; otherwise its number of negative eigenvalues where the
+    solver's factorization gives it anyway (QDLDL, SuperLU), or :data:`NOT_COUNTED` where
+    counting would cost a second factorization (PARDISO: the LDL^T after a failed Cholesky,
+    made by the first ``solve`` instead, if any). ``indefinite``: the caller already knows the
+    matrix is not positive definite (a negative Rayleigh quotient), so a solver with a
+    separate positive-definite test skips it. A zero pivot raises
+    :class:`SingularMatrixError`, here or (deferred) from ``solve``."""
+    own = getattr(solver, "factor_lazily", None)
+    if own is not None:
+        return int(own(H_upper, indefinite=indefinite))
+    return solver.factor(H_upper)
 
 
 def make_solver(kind: str = "auto") -> LDLSolver | LUSolver | PardisoSolver | AutoSolver:

@@ -44,7 +44,13 @@ from scipy.linalg import eigh
 from scipy.sparse.linalg import LinearOperator, lobpcg
 
 from ..mechanics.assemble import Assembly
-from .linear import SingularMatrixError, is_definite, make_solver
+from .linear import (
+    NOT_COUNTED,
+    SingularMatrixError,
+    factor_lazily,
+    is_definite,
+    make_solver,
+)
 
 __all__ = ["NewtonOptions", "NewtonResult", "ConvergenceError", "minimize"]
 
@@ -280,6 +286,9 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
     n_neg = -1
     res = float("inf")
     v_prev = None
+    # modes sought where the Hessian's negative pivots were not counted: all ``opts.modes``
+    # at first, then one more than the last search found
+    k_next = opts.modes
     mixed = opts.mixed and bool(asm.mixed_groups)
     recent: deque[float] = deque([E], maxlen=max(opts.nonmonotone, 1))
     stress = None
@@ -301,9 +310,19 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             g, H = asm.gradient_hessian(x)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
+        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
+        S = floor = None
+        if v_prev is not None:
+            # the last negative modes' Rayleigh quotient on the new H: below -marginal, H is
+            # proven not positive definite without trying a factorization
+            S = _jacobi_scale(H)
+            floor = _ritz_floor(Hs, S, v_prev)
         H_factored = True
         try:
-            n_neg = solver.factor(H)
+            # only "positive definite or not" is needed: PARDISO's LDL^T (the inertia) is
+            # made only if a solve asks for it (the inverse iteration of _lowest_modes)
+            n_neg = factor_lazily(solver, H, indefinite=floor is not None and
+                                  floor < -opts.marginal)
         except SingularMatrixError:
             n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
             H_factored = False
@@ -316,7 +335,7 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         if it == opts.max_iter:
             break
         if opts.definite_start and it == 0 and n_neg != 0:
-            return result(False, it, f"the start is not stable ({n_neg} negative pivots)",
+            return result(False, it, f"the start is not stable ({_pivots(n_neg)})",
                           unstable_start=True)
         if opts.curved_budget and watched_steps and it >= opts.curved_budget:
             return result(False, it, f"change of pattern: {it} iterations, {watched_steps} "
@@ -324,23 +343,24 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                                      f"(budget {opts.curved_budget})", over_budget=True)
         t0 = time.perf_counter()
         v = None
-        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
         if n_neg == 0:
             d = _refined_solve(solver, Hs, -g)
         else:
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
             shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
-            S = _jacobi_scale(H)
-            tau = _shift_until_definite(asm, shift_solver, H, S, tau, res,
-                                        _ritz_floor(Hs, S, v_prev))
+            if S is None:
+                S = _jacobi_scale(H)
+                floor = _ritz_floor(Hs, S, v_prev)
+            tau = _shift_until_definite(asm, shift_solver, H, S, tau, res, floor)
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
                 t1 = time.perf_counter()
-                k = int(min(n_neg, opts.modes)) if n_neg > 0 else 1
+                k = int(min(n_neg, opts.modes)) if n_neg > 0 else k_next
                 mus, V = _lowest_modes(Hs, S, shift_solver.solve, u.size, rng, v_prev,
-                                       tau, k, solver.solve if H_factored else None)
+                                       tau, k, _nan_if_singular(solver.solve)
+                                       if H_factored else None)
                 mu = float(mus[0])
                 times["eig"] += time.perf_counter() - t1
                 if res <= tol and np.isfinite(mu) and mu >= -opts.marginal:
@@ -352,6 +372,7 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                     # the negative modes found warm-start the next search (all of them: with
                     # one, the other k - 1 start from random vectors every time)
                     neg = np.asarray(mus) < 0
+                    k_next = int(min(opts.modes, np.count_nonzero(neg) + 1))
                     v_prev = V[:, neg] if np.all(np.isfinite(mus)) else V[:, :1]
                     v = _downhill_combination(mus, V, g, S, rng)
                     # give v the size of the shifted Newton step (in the S-norm), at least
@@ -390,7 +411,25 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
         E = E_new
         recent.append(E)
     return result(False, it, f"no stable equilibrium after {it} iterations: max|g| = "
-                             f"{res:.3e} (tolerance {tol:.3e}), negative eigenvalues: {n_neg}")
+                             f"{res:.3e} (tolerance {tol:.3e}), Hessian: {_pivots(n_neg)}")
+
+
+def _pivots(n_neg: int) -> str:
+    """How a message names a Hessian's negative pivots (``NOT_COUNTED``: known, not counted)."""
+    if n_neg == NOT_COUNTED:
+        return "not positive definite"
+    return f"{n_neg} negative pivots"
+
+
+def _nan_if_singular(solve):
+    """``solve`` returning NaN instead of raising on a singular matrix (a deferred LDL^T):
+    the inverse iteration then gives way to LOBPCG, as when H could not be factored."""
+    def f(b: np.ndarray) -> np.ndarray:
+        try:
+            return solve(b)
+        except SingularMatrixError:
+            return np.full(np.shape(b), np.nan)
+    return f
 
 
 def _twin(solver, kind: str):

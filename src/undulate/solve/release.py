@@ -43,7 +43,7 @@ from ..mechanics.fabric import dead_load
 from ..mechanics.material import FabricLaw, fabric_law
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
-from .linear import make_solver
+from .linear import SingularMatrixError, make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
 from .terms import TermState, groups
 
@@ -385,7 +385,10 @@ def _chord_correction(asm: Assembly, solver, x_pred: np.ndarray,
     E = asm.energy(x_pred)
     for _ in range(steps):
         g = asm.gradient(x_pred)
-        du = solver.solve(-g)
+        try:
+            du = solver.solve(-g)  # may make a deferred LDL^T (linear.factor_lazily)
+        except SingularMatrixError:
+            break
         if not np.all(np.isfinite(du)):
             break
         x_try = asm.full(asm.free(x_pred) + du, x_pred)
