@@ -244,3 +244,23 @@ def test_pardiso_threads_are_fixed_and_reproducible():
         n_neg = s.factor(sp.triu(A).tocsc())
         digests.add(hashlib.sha256(s.solve(b).tobytes()).hexdigest())
     assert n_neg > 0 and len(digests) == 1
+
+
+def test_single_threaded_blas_nests_and_restores():
+    """OpenBLAS runs on one thread inside the block (nested blocks share the limit) and gets
+    its thread count back after the last one; MKL (PARDISO) is left alone."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+
+    def threads(api):
+        return [d["num_threads"] for d in threadpoolctl.threadpool_info()
+                if d["internal_api"] == api]
+
+    before, mkl_before = threads("openblas"), threads("mkl")
+    if not before:
+        pytest.skip("NumPy is not linked with OpenBLAS here")
+    with linear.single_threaded_blas():
+        with linear.single_threaded_blas():
+            assert set(threads("openblas")) == {1}
+        assert set(threads("openblas")) == {1}
+        assert threads("mkl") == mkl_before
+    assert threads("openblas") == before

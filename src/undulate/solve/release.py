@@ -43,7 +43,7 @@ from ..mechanics.fabric import dead_load
 from ..mechanics.material import FabricLaw, fabric_law
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
-from .linear import SingularMatrixError, make_solver
+from .linear import SingularMatrixError, make_solver, single_threaded_blas
 from .newton import ConvergenceError, NewtonOptions, minimize
 from .terms import TermState, groups
 
@@ -233,8 +233,15 @@ def run_release(case: Case, progress: ProgressFn | None = None, *,
     """Run the whole experiment for ``case`` and return the final rest state.
 
     ``assembly``: a wrapper of the release's assembly (the batched runner of
-    :mod:`undulate.solve.batch` passes one that evaluates many runs together).
+    :mod:`undulate.solve.batch` passes one that evaluates many runs together). Dense linear
+    algebra runs on one thread meanwhile (:func:`undulate.solve.linear.single_threaded_blas`).
     """
+    with single_threaded_blas():
+        return _run_release(case, progress, assembly)
+
+
+def _run_release(case: Case, progress: ProgressFn | None,
+                 assembly: Callable[[Assembly], Assembly] | None) -> SimResult:
     t_start = time.perf_counter()
     sim = prepare(case)
     so = case.solver
