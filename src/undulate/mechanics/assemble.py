@@ -110,12 +110,13 @@ class ElementGroup:
         self._sizes = self._pieces()
         n_pad = sum(self._sizes)
         idx = np.concatenate([np.arange(n), np.zeros(n_pad - n, dtype=np.int64)])
-        # device arrays, chunked once (no host-to-device copies per evaluation)
-        nodes = jnp.asarray(self.nodes[idx])
-        params = [jnp.asarray(p[idx]) for p in self.params]
+        # device arrays, chunked once (no host-to-device copies per evaluation); cut on the
+        # host: slicing a device array is a JAX operation compiled for each new shape
+        nodes = np.asarray(self.nodes)[idx]
+        params = [np.asarray(p)[idx] for p in self.params]
         starts = np.concatenate([[0], np.cumsum(self._sizes)])[:-1].astype(np.int64)
         self._chunks = [
-            (nodes[s0 : s0 + m], tuple(p[s0 : s0 + m] for p in params))
+            (jnp.asarray(nodes[s0 : s0 + m]), tuple(jnp.asarray(p[s0 : s0 + m]) for p in params))
             for s0, m in zip(starts, self._sizes, strict=True)
         ]
         self._starts = starts

@@ -187,7 +187,9 @@ def rod_groups(
     and b); each element carries its rod's stiffnesses and offset.
     """
     secs = _per_rod(chains, sec)
-    xj = jnp.asarray(x_printed)
+    # gathers on the host: indexing a device array is a JAX operation of its own, compiled
+    # (or loaded from the cache) for every new index shape, once per process
+    xp = np.asarray(x_printed)
 
     def col(secs_: list[RodSection], name: str) -> np.ndarray:
         return np.array([getattr(q, name) for q in secs_], dtype=float)
@@ -202,7 +204,7 @@ def rod_groups(
     e_all = np.concatenate(e_idx)
     d_e = col(e_sec, "offset")
     # one kernel call for all rods (rods of different lengths would each compile their own)
-    L0 = np.asarray(_edge_len_v(xj[e_all], jnp.asarray(d_e)))
+    L0 = np.asarray(_edge_len_v(jnp.asarray(xp[e_all]), jnp.asarray(d_e)))
     L0_rod = np.split(L0, np.cumsum([len(e) for e in e_idx])[:-1])
     v_idx, v_sec, n_idx, n_sec, lv, ln = [], [], [], [], [], []
     for st, sk, le in zip(stencils, secs, L0_rod, strict=True):
@@ -225,7 +227,7 @@ def rod_groups(
     if v_idx:
         v_all = np.concatenate(v_idx)
         d_v = col(v_sec, "offset")
-        rest = np.asarray(_vertex_v(xj[v_all], jnp.asarray(d_v)))
+        rest = np.asarray(_vertex_v(jnp.asarray(xp[v_all]), jnp.asarray(d_v)))
         groups.append(
             ElementGroup(
                 "rod_bend_twist",
@@ -239,7 +241,7 @@ def rod_groups(
             )
         )
     n_all = np.concatenate(n_idx)
-    rest_n = np.asarray(_node_v(xj[n_all]))
+    rest_n = np.asarray(_node_v(jnp.asarray(xp[n_all])))
     lnn = np.concatenate(ln)
     E_B, nu_B, b, h = (col(n_sec, k) for k in ("E_B", "nu_B", "b", "h"))
     G_B = E_B / (2.0 * (1.0 + nu_B))
@@ -265,8 +267,9 @@ def rod_centrelines(chains: list[RodChain], x: np.ndarray,
     One jitted kernel for every call (the offset is an argument, not a constant baked into a
     new function), so the release loop, which calls this at every step, never retraces.
     """
-    xj = jnp.asarray(x)
-    return [np.asarray(_centre_v(xj[rod_stencils(ch)], jnp.asarray(sk.offset, jnp.float64)))
+    xp = np.asarray(x)
+    return [np.asarray(_centre_v(jnp.asarray(xp[rod_stencils(ch)]),
+                                 jnp.asarray(sk.offset, jnp.float64)))
             for ch, sk in zip(chains, _per_rod(chains, sec), strict=True)]
 
 
