@@ -1,7 +1,8 @@
 """Newton energy minimisation that finds minima, not saddles.
 
-Each iteration assembles the gradient g and the sparse Hessian H and factors H (LDL^T). The
-inertia of H decides the step:
+Each iteration assembles the gradient g and the sparse Hessian H and factors H
+(:func:`~undulate.solve.linear.factor_lazily`: whether H is positive definite decides the
+step; its negative pivots are not counted where that would cost a second factorization):
 
 * H positive definite: Newton step ``d = -H^-1 g`` with a backtracking (Armijo) line search.
 * H indefinite (e.g. the flat rod just past its buckling load, a saddle): the most negative
