@@ -134,8 +134,7 @@ def test_is_definite(kind):
 def test_factor_lazily(kind):
     """The Newton iteration's question, "positive definite or not": 0 for a positive definite
     matrix; for an indefinite one the inertia where the factorization gives it anyway, or
-    NOT_COUNTED (PARDISO: no LDL^T until a solve needs it); the solve is right either way,
-    also when the caller says the matrix is indefinite."""
+    NOT_COUNTED (PARDISO: no LDL^T until a solve needs it); the solve is right either way."""
     U = upper(laplacian_2d(12))
     A_full = U + sp.triu(U, 1).T
     n = U.shape[0]
@@ -144,18 +143,16 @@ def test_factor_lazily(kind):
     s = make_solver(kind)
     assert linear.factor_lazily(s, U) == 0
     np.testing.assert_allclose(A_full @ s.solve(b), b, atol=1e-9)
-    for indefinite in (False, True):
-        K = shifted(U, 0.5)
-        got = linear.factor_lazily(s, K, indefinite=indefinite)
-        assert got in (n_true, linear.NOT_COUNTED)
-        r = (A_full - 0.5 * sp.identity(n)) @ s.solve(b) - b
-        assert np.linalg.norm(r) <= 1e-8 * np.linalg.norm(b)
+    K = shifted(U, 0.5)
+    assert linear.factor_lazily(s, K) in (n_true, linear.NOT_COUNTED)
+    r = (A_full - 0.5 * sp.identity(n)) @ s.solve(b) - b
+    assert np.linalg.norm(r) <= 1e-8 * np.linalg.norm(b)
 
 
 @pytest.mark.skipif(not HAVE_PARDISO, reason="MKL PARDISO not installed (extra 'fast')")
 def test_pardiso_factor_lazily_defers_ldl():
-    """PARDISO: a failed Cholesky leaves the LDL^T to the first solve (none without a solve);
-    ``indefinite=True`` skips the Cholesky; a singular pending matrix raises from solve."""
+    """PARDISO: a failed Cholesky leaves the LDL^T to the first solve (none without a solve,
+    made once however many solves); a singular pending matrix raises from solve."""
     s = PardisoSolver()
     U = upper(laplacian_2d(10))
     K = shifted(U, 0.5)
@@ -163,13 +160,12 @@ def test_pardiso_factor_lazily_defers_ldl():
     assert s.counts == {"cholesky": 0, "cholesky_failed": 1, "ldl": 0}
     assert s.factor_lazily(U) == 0  # no solve asked for the pending LDL^T: never made
     assert s.counts == {"cholesky": 1, "cholesky_failed": 1, "ldl": 0}
-    assert s.factor_lazily(K, indefinite=True) == linear.NOT_COUNTED
+    assert s.factor_lazily(K) == linear.NOT_COUNTED
     s.solve(np.ones(U.shape[0]))
     s.solve(np.ones(U.shape[0]))  # the LDL^T is made once
-    assert s.counts == {"cholesky": 1, "cholesky_failed": 1, "ldl": 1}
+    assert s.counts == {"cholesky": 1, "cholesky_failed": 2, "ldl": 1}
     s2 = PardisoSolver()
-    assert s2.factor_lazily(upper(sp.csc_matrix(np.ones((2, 2)))),
-                            indefinite=True) == linear.NOT_COUNTED
+    assert s2.factor_lazily(upper(sp.csc_matrix(np.ones((2, 2))))) == linear.NOT_COUNTED
     with pytest.raises(SingularMatrixError):
         s2.solve(np.ones(2))
 

@@ -342,9 +342,8 @@ class PardisoSolver:
     ``factor`` tries Cholesky and falls back to LDL^T, whose factorization then serves
     ``solve`` and whose inertia is returned; ``is_definite`` (the shift search's question) tries
     Cholesky only; ``factor_lazily`` (a Newton iteration that needs only "positive definite or
-    not") leaves the LDL^T of an indefinite matrix to the first ``solve`` that needs it, and
-    skips the Cholesky as well when the caller already knows the answer. ``solve`` takes one
-    right-hand side (n,) or several (n, k).
+    not") leaves the LDL^T of an indefinite matrix to the first ``solve`` that needs it.
+    ``solve`` takes one right-hand side (n,) or several (n, k).
     """
 
     name = "pardiso"
@@ -377,11 +376,10 @@ class PardisoSolver:
             return 0
         return self._factor_ldl(H_upper)
 
-    def factor_lazily(self, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
+    def factor_lazily(self, H_upper: sp.csc_matrix) -> int:
         """0 when ``H_upper`` is positive definite (Cholesky, kept for ``solve``), else
-        :data:`NOT_COUNTED`, its LDL^T made by the first ``solve``. ``indefinite``: the
-        caller knows H is not positive definite; no Cholesky is tried."""
-        if not indefinite and self.is_definite(H_upper):
+        :data:`NOT_COUNTED`, its LDL^T made by the first ``solve``."""
+        if self.is_definite(H_upper):
             return 0
         self._active = None
         self._pending = H_upper
@@ -468,8 +466,8 @@ class AutoSolver:
     def is_definite(self, H_upper: sp.csc_matrix) -> bool:
         return is_definite(self._pick(H_upper), H_upper)
 
-    def factor_lazily(self, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
-        return factor_lazily(self._pick(H_upper), H_upper, indefinite=indefinite)
+    def factor_lazily(self, H_upper: sp.csc_matrix) -> int:
+        return factor_lazily(self._pick(H_upper), H_upper)
 
 
 def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
@@ -485,18 +483,16 @@ def is_definite(solver, H_upper: sp.csc_matrix) -> bool:
         return False
 
 
-def factor_lazily(solver, H_upper: sp.csc_matrix, *, indefinite: bool = False) -> int:
+def factor_lazily(solver, H_upper: sp.csc_matrix) -> int:
     """Factor ``H_upper`` for ``solver.solve`` where the caller needs to know only whether it
     is positive definite: 0 when it is; otherwise its number of negative eigenvalues where the
     solver's factorization gives it anyway (QDLDL, SuperLU), or :data:`NOT_COUNTED` where
     counting would cost a second factorization (PARDISO: the LDL^T after a failed Cholesky,
-    made by the first ``solve`` instead, if any). ``indefinite``: the caller already knows the
-    matrix is not positive definite (a negative Rayleigh quotient), so a solver with a
-    separate positive-definite test skips it. A zero pivot raises
+    made by the first ``solve`` instead, if any). A zero pivot raises
     :class:`SingularMatrixError`, here or (deferred) from ``solve``."""
     own = getattr(solver, "factor_lazily", None)
     if own is not None:
-        return int(own(H_upper, indefinite=indefinite))
+        return int(own(H_upper))
     return solver.factor(H_upper)
 
 

@@ -315,19 +315,11 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
             g, H = asm.gradient_hessian(x)
         times["assembly"] += time.perf_counter() - t0
         t0 = time.perf_counter()
-        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
-        S = floor = None
-        if v_prev is not None:
-            # the last negative modes' Rayleigh quotient on the new H: below -marginal, H is
-            # proven not positive definite without trying a factorization
-            S = _jacobi_scale(H)
-            floor = _ritz_floor(Hs, S, v_prev)
         H_factored = True
         try:
             # only "positive definite or not" is needed: PARDISO's LDL^T (the inertia) is
             # made only if a solve asks for it (the inverse iteration of _lowest_modes)
-            n_neg = factor_lazily(solver, H, indefinite=floor is not None and
-                                  floor < -opts.marginal)
+            n_neg = factor_lazily(solver, H)
         except SingularMatrixError:
             n_neg = 1  # treat a singular Hessian like an indefinite one: shift it
             H_factored = False
@@ -348,16 +340,16 @@ def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
                                      f"(budget {opts.curved_budget})", over_budget=True)
         t0 = time.perf_counter()
         v = None
+        Hs = asm.symmetric(H)  # the full matrix, formed once per iteration
         if n_neg == 0:
             d = _refined_solve(solver, Hs, -g)
         else:
             # the shifted matrix is factored by a twin solver: H's own (indefinite)
             # factorization stays at hand for the inverse iteration of _lowest_modes
             shift_solver = _twin(solver, opts.linear_solver) if H_factored else solver
-            if S is None:
-                S = _jacobi_scale(H)
-                floor = _ritz_floor(Hs, S, v_prev)
-            tau = _shift_until_definite(asm, shift_solver, H, S, tau, res, floor)
+            S = _jacobi_scale(H)
+            tau = _shift_until_definite(asm, shift_solver, H, S, tau, res,
+                                        _ritz_floor(Hs, S, v_prev))
             times["factor"] += time.perf_counter() - t0
             d = -shift_solver.solve(g)
             if opts.negative_curvature:
