@@ -1,4 +1,5 @@
-"""Traced kernels kept on disk (undulate.mechanics.compiled): same bits, robust to damage."""
+"""Traced kernels and their executables kept on disk (undulate.mechanics.compiled): same
+bits, robust to damage, keyed by the machine."""
 
 from pathlib import Path
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 import undulate.mechanics.assemble  # noqa: F401  (float64, as in every run)
+from undulate.mechanics import compiled
 from undulate.mechanics.compiled import CachedJit
 
 
@@ -28,12 +30,13 @@ def _args():
 
 def test_loaded_program_gives_the_same_bits(cache_dir: Path) -> None:
     x, w = _args()
-    first = CachedJit(_kernel, "test.kernel")(x, w)  # traces and writes the program
-    files = list((cache_dir / "export").glob("test.kernel-*.jaxexport"))
-    assert len(files) == 1 and files[0].stat().st_size > 0
-    mtime = files[0].stat().st_mtime_ns
-    again = CachedJit(_kernel, "test.kernel")(x, w)  # a new instance loads it
-    assert files[0].stat().st_mtime_ns == mtime
+    first = CachedJit(_kernel, "test.kernel")(x, w)  # traces, compiles, writes both
+    files = list((cache_dir / "export").glob("test.kernel-*.jaxexport")) + \
+        list((cache_dir / "exe").glob("test.kernel-*.xlaexe"))
+    assert len(files) == 2 and all(f.stat().st_size > 0 for f in files)
+    mtimes = [f.stat().st_mtime_ns for f in files]
+    again = CachedJit(_kernel, "test.kernel")(x, w)  # a new instance loads the executable
+    assert [f.stat().st_mtime_ns for f in files] == mtimes
     for a, b in zip(first, again, strict=True):
         assert np.array_equal(np.asarray(a), np.asarray(b))
     ref = _kernel(jnp.asarray(x), jnp.asarray(w))
@@ -47,11 +50,29 @@ def test_loaded_program_gives_the_same_bits(cache_dir: Path) -> None:
 def test_damaged_entry_is_made_again(cache_dir: Path) -> None:
     x, w = _args()
     CachedJit(_kernel, "test.kernel")(x, w)
-    (f,) = (cache_dir / "export").glob("test.kernel-*.jaxexport")
-    f.write_bytes(b"not a program")
+    (exe,) = (cache_dir / "exe").glob("test.kernel-*.xlaexe")
+    exe.write_bytes(b"not an executable")
     out = CachedJit(_kernel, "test.kernel")(x, w)
     assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
-    assert f.stat().st_size > 100
+    assert exe.stat().st_size > 100
+    # a damaged program (and no executable): traced again
+    (f,) = (cache_dir / "export").glob("test.kernel-*.jaxexport")
+    f.write_bytes(b"not a program")
+    exe.unlink()
+    out = CachedJit(_kernel, "test.kernel")(x, w)
+    assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
+    assert f.stat().st_size > 100 and exe.stat().st_size > 100
+
+
+def test_executable_of_another_machine_is_not_loaded(cache_dir: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    x, w = _args()
+    CachedJit(_kernel, "test.kernel")(x, w)
+    monkeypatch.setattr(compiled, "_machine_digest", lambda: "another processor")
+    out = CachedJit(_kernel, "test.kernel")(x, w)
+    assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
+    assert len(list((cache_dir / "exe").glob("test.kernel-*.xlaexe"))) == 2
+    assert len(list((cache_dir / "export").glob("test.kernel-*.jaxexport"))) == 1
 
 
 def test_cache_off_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -60,4 +81,20 @@ def test_cache_off_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     x, w = _args()
     out = CachedJit(_kernel, "test.kernel")(x, w)
     assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
-    assert not (tmp_path / "export").exists()
+    assert not (tmp_path / "export").exists() and not (tmp_path / "exe").exists()
+
+
+def test_executable_that_does_not_load_back_is_not_written(cache_dir: Path,
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """A copy that does not give the same bits (as an executable JAX's own cache handed back):
+    a marker instead of the executable, and later processes compile as before."""
+    x, w = _args()
+    monkeypatch.setattr(compiled, "_same_bits", lambda a, b: False)
+    out = CachedJit(_kernel, "test.kernel")(x, w)
+    assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
+    assert not list((cache_dir / "exe").glob("test.kernel-*.xlaexe"))
+    (marker,) = (cache_dir / "exe").glob("test.kernel-*.xlaexe.none")
+    monkeypatch.undo()
+    out = CachedJit(_kernel, "test.kernel")(x, w)
+    assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
+    assert not list((cache_dir / "exe").glob("test.kernel-*.xlaexe")) and marker.is_file()

@@ -80,3 +80,24 @@ def test_a_group_alone_on_its_layout_is_fused_too() -> None:
     assert np.abs(H1.data - H0.data).max() <= 1e-12 * np.abs(H0.data).max()
     assert np.abs(g1 - g0).max() <= 1e-12 * np.abs(g0).max()
     assert isinstance(only[0], ElementGroup)
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 16, 17, 23])
+def test_chunked_vmap_is_vmap(n: int) -> None:
+    """One batch up to two chunks, a loop of chunks beyond (the last one filled up with copies
+    of the last row): the same numbers as a plain vmap either way."""
+    import jax
+    import jax.numpy as jnp
+
+    from undulate.mechanics.frames import chunked_vmap
+
+    def f(a, b):
+        return jnp.sin(a) * b[0], jnp.outer(a, b)
+
+    rng = np.random.default_rng(n)
+    a, b = rng.standard_normal((n, 3)), rng.standard_normal((n, 2))
+    got = jax.jit(chunked_vmap(f, 4))(a, b)
+    ref = jax.vmap(f)(a, b)
+    for g, r in zip(got, ref, strict=True):
+        assert g.shape == r.shape
+        assert np.allclose(np.asarray(g), np.asarray(r), rtol=1e-15, atol=0)

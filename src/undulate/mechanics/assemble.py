@@ -25,18 +25,13 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import CachedJit, cache_root
+from .compiled import CachedJit
 
 jax.config.update("jax_enable_x64", True)
-# Compiled kernels are cached on disk: the first run on a machine pays the XLA compilation
-# (tens of seconds for the rod kernels), later runs and worker processes load them; the traced
-# programs are kept too (undulate.mechanics.compiled), so later processes skip tracing.
-_cache = cache_root()
-if _cache is not None:
-    jax.config.update("jax_compilation_cache_dir", str(_cache))
-    # every kernel, also those that compile in a fraction of a second: 44 of them took 1.8 s
-    # to compile again in each new process with the 0.2 s threshold (measured)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+# Compiled kernels are kept on disk (undulate.mechanics.compiled): the first run on a machine
+# pays tracing and XLA's compilation (tens of seconds for the rod kernels), later runs and
+# worker processes load the executables. JAX's own persistent compilation cache is not
+# switched on: an executable it hands back cannot be written to undulate's cache again.
 
 __all__ = ["ElementGroup", "Assembly", "StrainForm", "StrainTerm", "strain_form",
            "strain_form_kernels"]
@@ -111,12 +106,14 @@ class ElementGroup:
         n_pad = sum(self._sizes)
         idx = np.concatenate([np.arange(n), np.zeros(n_pad - n, dtype=np.int64)])
         # device arrays, chunked once (no host-to-device copies per evaluation); cut on the
-        # host: slicing a device array is a JAX operation compiled for each new shape
+        # host and put with jax.device_put: slicing a device array, and jnp.asarray, are JAX
+        # programs compiled for each new shape (the demo's set-up: 41 of them, 0.24 s)
         nodes = np.asarray(self.nodes)[idx]
         params = [np.asarray(p)[idx] for p in self.params]
         starts = np.concatenate([[0], np.cumsum(self._sizes)])[:-1].astype(np.int64)
         self._chunks = [
-            (jnp.asarray(nodes[s0 : s0 + m]), tuple(jnp.asarray(p[s0 : s0 + m]) for p in params))
+            (jax.device_put(nodes[s0 : s0 + m]),
+             tuple(jax.device_put(p[s0 : s0 + m]) for p in params))
             for s0, m in zip(starts, self._sizes, strict=True)
         ]
         self._starts = starts

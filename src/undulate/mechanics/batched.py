@@ -25,7 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
-from .assemble import Assembly, gathered_kernels
+from .assemble import Assembly, _disk_label, gathered_kernels
+from .compiled import CachedJit
 
 __all__ = ["BatchedAssembly", "RunBatch", "check_same_topology"]
 
@@ -152,8 +153,10 @@ class RunBatch:
     def _kernel(fn: Callable, name: str, n_args: int) -> Callable:
         key = (fn, name, n_args)
         if key not in _RUN_KERNELS:  # shared by all batches (jit keeps one program per shape)
-            k = gathered_kernels(fn)[name]
-            _RUN_KERNELS[key] = jax.jit(jax.vmap(k, in_axes=(0, None) + (0,) * n_args))
+            k = jax.vmap(gathered_kernels(fn)[name], in_axes=(0, None) + (0,) * n_args)
+            label = _disk_label(fn)  # undulate's own energies: kept on disk, as single runs
+            _RUN_KERNELS[key] = (CachedJit(k, f"batched.{label}.{name}.{n_args}") if label
+                                 else jax.jit(k))
         return _RUN_KERNELS[key]
 
     def run(self, runs: Sequence[int], i: int, name: str, X: jnp.ndarray, *extra: jnp.ndarray,

@@ -204,7 +204,7 @@ def rod_groups(
     e_all = np.concatenate(e_idx)
     d_e = col(e_sec, "offset")
     # one kernel call for all rods (rods of different lengths would each compile their own)
-    L0 = np.asarray(_edge_len_v(jnp.asarray(xp[e_all]), jnp.asarray(d_e)))
+    L0 = np.asarray(_edge_len_v(xp[e_all], d_e))
     L0_rod = np.split(L0, np.cumsum([len(e) for e in e_idx])[:-1])
     v_idx, v_sec, n_idx, n_sec, lv, ln = [], [], [], [], [], []
     for st, sk, le in zip(stencils, secs, L0_rod, strict=True):
@@ -227,7 +227,7 @@ def rod_groups(
     if v_idx:
         v_all = np.concatenate(v_idx)
         d_v = col(v_sec, "offset")
-        rest = np.asarray(_vertex_v(jnp.asarray(xp[v_all]), jnp.asarray(d_v)))
+        rest = np.asarray(_vertex_v(xp[v_all], d_v))
         groups.append(
             ElementGroup(
                 "rod_bend_twist",
@@ -241,7 +241,7 @@ def rod_groups(
             )
         )
     n_all = np.concatenate(n_idx)
-    rest_n = np.asarray(_node_v(jnp.asarray(xp[n_all])))
+    rest_n = np.asarray(_node_v(xp[n_all]))
     lnn = np.concatenate(ln)
     E_B, nu_B, b, h = (col(n_sec, k) for k in ("E_B", "nu_B", "b", "h"))
     G_B = E_B / (2.0 * (1.0 + nu_B))
@@ -268,8 +268,7 @@ def rod_centrelines(chains: list[RodChain], x: np.ndarray,
     new function), so the release loop, which calls this at every step, never retraces.
     """
     xp = np.asarray(x)
-    return [np.asarray(_centre_v(jnp.asarray(xp[rod_stencils(ch)]),
-                                 jnp.asarray(sk.offset, jnp.float64)))
+    return [np.asarray(_centre_v(xp[rod_stencils(ch)], np.asarray(sk.offset, np.float64)))
             for ch, sk in zip(chains, _per_rod(chains, sec), strict=True)]
 
 

@@ -1,17 +1,31 @@
-"""Jitted kernels whose traced programs are kept on disk, so that a new process skips tracing.
+"""Jitted kernels whose traced programs and compiled executables are kept on disk.
 
-JAX's persistent compilation cache (set up in :mod:`undulate.mechanics.assemble`) stores the
-*compiled* executables, but every new process still has to *trace* each kernel (run the Python
-function under JAX's tracers, with ``jax.hessian``/``jax.jacfwd`` of the rod's frame) to find
-the cache entry: measured 1.4 s for the rod bending kernel alone, ~8 s of a 10 s start-up in
-all. :class:`CachedJit` keeps the traced program itself (``jax.export``, serialized StableHLO)
-in ``<cache dir>/export``, keyed by the kernel's name, the argument shapes, the JAX version,
-the backend and a digest of undulate's own source files (any edit of the package makes new
-entries); a later process deserializes it (milliseconds) and compiles it from the persistent
-cache. The program is the same either way, and it is always called through the exported
-form, so a run gives the same bits whether it traced or loaded (``tests/test_determinism.py``).
+A new process would otherwise pay, for each kernel, tracing (run the Python function under JAX's
+tracers, with ``jax.hessian``/``jax.jacfwd`` of the rod's frame: measured 1.4 s for the rod
+bending kernel alone, ~8 s of a 10 s start-up in all), XLA's compilation (tens of seconds for
+the rod kernels), or, with JAX's persistent compilation cache, lowering the traced program and
+looking it up (the demo's 27 kernels: 0.3 s of lowering and key hashing besides the loads).
+:class:`CachedJit` keeps two files per kernel and argument shapes in ``<cache dir>``:
 
-``UNDULATE_JAX_CACHE=0`` turns this off with the compilation cache (plain ``jax.jit``).
+* ``export/<name>-<key>.jaxexport``: the traced program (``jax.export``, serialized StableHLO);
+* ``exe/<name>-<key>.xlaexe``: the executable XLA compiled from it
+  (``jax.experimental.serialize_executable``), which a later process loads directly: no
+  tracing, no lowering, no lookup, no compilation.
+
+The key holds the kernel's name, the argument shapes, the JAX version, the backend, a digest of
+undulate's own source files (any edit of the package makes new entries), ``XLA_FLAGS`` and, for
+executables, the processor (model and instruction-set flags: machine code is not portable). The
+program is the same either way, and it is always called through the exported form, so a run
+gives the same bits whether it traced, compiled or loaded (``tests/test_determinism.py``).
+
+An executable is written only after a copy loaded back from its bytes has given the same bits
+on the call's arguments. This is why undulate does not switch on JAX's persistent compilation
+cache: an executable that cache hands back cannot be serialized again (the copy fails with
+"Function ... not found"). Where that happens anyway (a user's own ``JAX_COMPILATION_CACHE_DIR``)
+a marker file ``<exe>.none`` records it and later processes compile through JAX's cache as
+before.
+
+``UNDULATE_JAX_CACHE=0`` turns all of this off (plain ``jax.jit``).
 """
 
 from __future__ import annotations
@@ -19,6 +33,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import pickle
+import platform
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -58,6 +75,31 @@ def _source_digest(parts: tuple[str, ...] | None = None) -> str:
     return h.hexdigest()
 
 
+@functools.cache
+def _machine_digest() -> str:
+    """The processor, as far as machine code cares: model name and instruction-set flags (Linux
+    ``/proc/cpuinfo``), else what :mod:`platform` says."""
+    text = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key = line.split(":", 1)[0].strip()
+            if key in ("model name", "flags", "Features", "CPU implementer", "CPU part"):
+                text += line + "\n"
+            elif not line.strip() and text:
+                break  # the first processor is enough
+    except OSError:
+        pass
+    text += f"{platform.machine()}|{platform.processor()}|{platform.system()}"
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _same_bits(a: Any, b: Any) -> bool:
+    la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    return len(la) == len(lb) and all(
+        np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
+        for x, y in zip(la, lb, strict=True))
+
+
 def _aval_key(args: tuple) -> tuple:
     return tuple((tuple(np.shape(a)), str(jnp.result_type(a))) for a in args)
 
@@ -74,6 +116,9 @@ class CachedJit:
         self.name = name
         self._jit = jax.jit(fn)
         self._by_avals: dict[tuple, Callable[..., Any]] = {}
+        # one load per shape also when threads ask at once (the assembly evaluates element
+        # groups on two threads: the first caller loads, the others wait)
+        self._lock = threading.Lock()
 
     def __call__(self, *args: Any) -> Any:
         args = tuple(a if isinstance(a, jax.Array | np.ndarray) else jnp.asarray(a)
@@ -81,7 +126,10 @@ class CachedJit:
         key = _aval_key(args)
         f = self._by_avals.get(key)
         if f is None:
-            f = self._by_avals[key] = self._program(args, key)
+            with self._lock:
+                f = self._by_avals.get(key)
+                if f is None:
+                    f = self._by_avals[key] = self._program(args, key)
         return f(*args)
 
     def _program(self, args: tuple, key: tuple) -> Callable[..., Any]:
@@ -90,12 +138,25 @@ class CachedJit:
             return self._jit
         try:
             from jax import export
+            from jax.experimental import serialize_executable
         except ImportError:  # pragma: no cover - old JAX
             return self._jit
         digest = hashlib.sha256(
             f"{_source_digest()}|{self.name}|{key}|{jax.default_backend()}|"
             f"x64={jax.config.jax_enable_x64}".encode()
         ).hexdigest()[:24]
+        backend = jax.devices()[0].client
+        exe_digest = hashlib.sha256(
+            f"{digest}|{backend.platform}|{backend.platform_version}|"
+            f"{os.environ.get('XLA_FLAGS', '')}|{_machine_digest()}".encode()
+        ).hexdigest()[:24]
+        exe_path = root / "exe" / f"{self.name}-{exe_digest}.xlaexe"
+        if exe_path.is_file():
+            try:
+                payload, in_tree, out_tree = pickle.loads(exe_path.read_bytes())
+                return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+            except Exception:  # noqa: BLE001 - a damaged entry is made again
+                pass
         path = root / "export" / f"{self.name}-{digest}.jaxexport"
         exp = None
         if path.is_file():
@@ -114,4 +175,23 @@ class CachedJit:
                     Path(tmp).write_bytes(bytes(data))
             except OSError:
                 pass  # an unwritable cache only costs the next process a trace
-        return jax.jit(exp.call)
+        program = jax.jit(exp.call)
+        marker = exe_path.with_name(exe_path.name + ".none")
+        if marker.is_file():
+            return program
+        try:
+            compiled = program.lower(*args).compile()
+        except Exception:  # noqa: BLE001 - e.g. a backend without AOT compilation
+            return program
+        try:
+            blob = pickle.dumps(serialize_executable.serialize(compiled))
+            loaded = serialize_executable.deserialize_and_load(*pickle.loads(blob))
+            keep = _same_bits(compiled(*args), loaded(*args))
+        except Exception:  # noqa: BLE001 - not serializable here
+            keep = False
+        try:
+            with atomic_path(exe_path if keep else marker) as tmp:
+                Path(tmp).write_bytes(blob if keep else b"")
+        except OSError:
+            pass  # an unwritable cache only costs the next process a compilation
+        return compiled

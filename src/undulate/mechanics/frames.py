@@ -26,9 +26,10 @@ those of the element-by-element assembly to roundoff (``tests/test_frames.py``);
 of one Hessian costs a quarter to a third of the time (docs/benchmarks.md, thirteenth pass).
 
 The per-element and per-node derivatives run in chunks of :data:`CHUNK` rows (``lax.map`` over
-``vmap``-ed chunks): XLA on the CPU runs a small batch of these small Hessians several times
-faster per element than one large batch (measured: the twist term's Hessians of 505 vertices
-5.3 ms in one batch, 1.2 ms in chunks of 32 to 101).
+``vmap``-ed chunks) once there are more than two chunks' worth: XLA on the CPU runs a small
+batch of these small Hessians several times faster per element than one large batch
+(measured: the twist term's Hessians of 505 vertices 5.3 ms in one batch, 1.2 ms in chunks of
+32 to 101), but a loop of two chunks costs more than one batch of up to 128.
 """
 
 from __future__ import annotations
@@ -80,7 +81,9 @@ def chunked_vmap(f: Callable, chunk: int | None = None) -> Callable:
     def g(*args):
         c = chunk or CHUNK
         n = args[0].shape[0]
-        if n <= c:
+        if n <= 2 * c:
+            # one batch up to two chunks: a loop of two costs more than the larger batch
+            # (the demo's 101 rod nodes: the fused rod kernel 2.5 -> 1.8 ms)
             return jax.vmap(f)(*args)
         m = -(-n // c)
         pad = m * c - n
@@ -226,9 +229,10 @@ class FusedFrames:
         self.groups = groups
         self.n_blocks = nbs
         self.D = max(nbs) - 1
-        self._nodes = jnp.asarray(layout.nodes)
-        self._fill = jnp.asarray(np.array([int(g.frames.first[0]) for g in groups]))
-        self._valid = [jnp.asarray(np.isin(np.arange(M), g.frames.first).astype(float))
+        # jax.device_put, not jnp.asarray (a program compiled per new shape)
+        self._nodes = jax.device_put(layout.nodes)
+        self._fill = jax.device_put(np.array([int(g.frames.first[0]) for g in groups]))
+        self._valid = [jax.device_put(np.isin(np.arange(M), g.frames.first).astype(float))
                        for g in groups]
         self._params_key: tuple | None = None
         self._params: list = []
@@ -291,7 +295,7 @@ class FusedFrames:
                 for p in g.params:
                     a = np.repeat(p[:1], self.M, axis=0)  # any valid element's numbers
                     a[first] = p
-                    laid.append(jnp.asarray(a))
+                    laid.append(jax.device_put(a))
                 out.append(laid)
             self._params, self._params_key = out, key
         return self._params
@@ -306,7 +310,7 @@ class FusedFrames:
                                     strict=True):
             sl = np.zeros((self.M,) + np.shape(s)[1:])
             sl[g.frames.first] = s
-            args += [valid, *par, jnp.asarray(sl)]
+            args += [valid, *par, jax.device_put(sl)]
         out = self._kernel(xj, self._nodes, self._fill, *args)
         g_nodes = np.asarray(out[0])
         vals = []
