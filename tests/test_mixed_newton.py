@@ -119,3 +119,50 @@ def test_mixed_newton_reaches_the_same_elastica():
         np.testing.assert_allclose(x_key, x_plain, atol=1e-6)
         assert out[key].energy == pytest.approx(out[False, False].energy, rel=1e-9)
         assert out[key].n_negative == 0
+
+
+@pytest.mark.parametrize("fn, nb, params", CASES, ids=["stretch", "bend_twist", "footprint"])
+def test_merit_kernel_returns_the_linearized_stress(fn, nb, params):
+    """``merit_step`` ends with the stress of the strains linearized along the step, the
+    numbers of ``stress_lin`` (to roundoff): the stress a Newton iteration carries on."""
+    rng = np.random.default_rng(5)
+    x = _stencil(rng, nb)
+    nodes = jnp.asarray(np.arange(5 * nb)[None, :])
+    P = [jnp.asarray(np.asarray(p, dtype=float))[None] for p in params()]
+    k = kernels_for(fn)
+    dx = jnp.asarray(1e-3 * rng.standard_normal(x.shape))
+    m = np.asarray(k["merit_step"](jnp.asarray(x), nodes, *P, dx))[0]
+    s = np.asarray(k["stress_lin"](jnp.asarray(x), nodes, *P, dx))[0]
+    assert m.shape == (2 + s.size,)
+    np.testing.assert_allclose(m[2:], s, rtol=1e-12, atol=1e-12 * np.max(np.abs(s)))
+
+
+def test_assembly_reuses_the_stresses_of_a_merit_evaluation():
+    """After a line search evaluated a step's merit, the stresses of that step come from it
+    (no kernel call), the same bits as evaluated afresh."""
+    from undulate.mechanics.assemble import Assembly, ElementGroup
+    from undulate.mechanics.build import RodSection, free_rod, rod_groups
+
+    chain, X = free_rod(12, 11.0, 2.0)
+    sec = RodSection(h=0.5, b=2.0, E_B=1e3, nu_B=0.35, t=0.4)
+    gs = rod_groups([chain], X, sec)
+    fixed = np.zeros((X.shape[0], 3), bool)
+    fixed[:5] = True
+    asm = Assembly(X.shape[0], gs, fixed)
+    rng = np.random.default_rng(2)
+    dx = 1e-2 * rng.standard_normal(X.shape)
+    fresh = asm.stress_linearized(X, dx)
+    asm.merit(X, dx)
+    calls = []
+    run0 = ElementGroup.run
+    try:
+        ElementGroup.run = lambda self, *a, **k: calls.append(a) or run0(self, *a, **k)
+        again = asm.stress_linearized(X, dx)
+        other = asm.stress_linearized(X, 2 * dx)
+    finally:
+        ElementGroup.run = run0
+    assert set(again) == set(fresh) == set(asm.mixed_groups) and asm.mixed_groups
+    for i in fresh:
+        assert np.array_equal(again[i], fresh[i])
+    assert len(calls) == len(asm.mixed_groups)  # only the step never evaluated
+    assert not all(np.array_equal(other[i], fresh[i]) for i in fresh)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import os
+from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -41,6 +42,8 @@ __all__ = ["ElementGroup", "Assembly", "StrainForm", "StrainTerm", "strain_form"
 PAD_TO = 16
 #: most elements per kernel call
 CALL_CAP = 4096
+#: merit evaluations whose carried stresses an Assembly keeps for stress_linearized
+MERIT_STRESSES_KEPT = 4
 
 
 def _round_up(n: int, m: int) -> int:
@@ -306,7 +309,8 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
     ``grad_hess`` is the exact (consistent) pair; ``grad_hess_mixed(xl, *params, s)`` uses the
     given element stresses ``s`` (m,) in the geometric term; ``stress`` returns ``k e`` and
     ``stress_lin(xl, *params, dxl)`` the stress of the strains linearized at ``xl`` along
-    ``dxl``, ``k (e + J dx)``.
+    ``dxl``, ``k (e + J dx)``; ``merit_step(xl, *params, dxl)`` the mixed merit and the energy
+    at ``xl + dxl`` followed by that stress (2 + m,).
     """
     nb = sf.n_blocks
 
@@ -370,12 +374,16 @@ def strain_form_kernels(sf: StrainForm) -> dict[str, Callable]:
 
     def merit_step_one(xl, *args):
         # at xl + dxl: the energy, and the mixed merit s e - s^2 / (2 k) with s = k e_lin the
-        # stress of the strains linearized at xl (= the energy less k (e - e_lin)^2 / 2)
+        # stress of the strains linearized at xl (= the energy less k (e - e_lin)^2 / 2);
+        # then s itself (what stress_lin returns for this step: the stress a Newton iteration
+        # carries on when the line search takes the step)
         p, dxl = args[:-1], args[-1]
         e_lin = linearized_strains(xl, p, dxl)
         e1 = strains(xl + dxl, p)
         k = sf.moduli(*p)
-        return jnp.stack([jnp.sum(k * e_lin * (e1 - 0.5 * e_lin)), 0.5 * jnp.sum(k * e1 * e1)])
+        return jnp.concatenate([
+            jnp.stack([jnp.sum(k * e_lin * (e1 - 0.5 * e_lin)), 0.5 * jnp.sum(k * e1 * e1)]),
+            k * e_lin])
 
     return {
         "per_element": jax.vmap(energy),
@@ -489,6 +497,8 @@ class Assembly:
         dof_map[self.free_dofs] = np.arange(self.n_free)
         self._dof_map = dof_map
         self._build_pattern()
+        #: (x, dx, stresses) of the last merit evaluations (see stress_linearized)
+        self._merit_stresses: deque = deque(maxlen=MERIT_STRESSES_KEPT)
         from .frames import fused_frame_sets
 
         #: strain-form groups on shared frames, whose Hessian is made through the frames
@@ -697,16 +707,28 @@ class Assembly:
         return {i: self._stress(i, xj) for i in self.mixed_groups}
 
     def _stress(self, i: int, xj: jnp.ndarray) -> np.ndarray:
-        # k (e + J 0) = k e through the linearized-stress kernel, which every mixed Newton
-        # iteration loads anyway (the same numbers as the "stress" kernel)
+        # k (e + J 0) = k e through the merit's kernel, which every mixed Newton iteration
+        # loads anyway (the same numbers as the "stress" kernel)
+        return self._stress_lin(i, xj, jnp.zeros_like(xj))
+
+    def _stress_lin(self, i: int, xj: jnp.ndarray, dj: jnp.ndarray) -> np.ndarray:
+        # k (e + J dx): the stress columns of the merit's kernel, so that a step's carried
+        # stresses are the same numbers whether its merit was evaluated or not (a kernel of
+        # their own gave other roundoff; and it is one program less to load)
         g = self.groups[i]
-        return self.joined(g, g.run("stress_lin", xj, jnp.zeros_like(xj)))
+        return self.joined(g, g.run("merit_step", xj, dj))[:, 2:]
 
     def stress_linearized(self, x: np.ndarray, dx: np.ndarray) -> dict[int, np.ndarray]:
-        """Stresses of the strains linearized at ``x`` and moved by ``dx``: ``k (e + J dx)``."""
+        """Stresses of the strains linearized at ``x`` and moved by ``dx``: ``k (e + J dx)``.
+
+        A step whose merit :meth:`merit` evaluated lately (the one a line search took) has
+        them already: the same numbers, from the merit's kernel.
+        """
+        for xm, dxm, st in self._merit_stresses:
+            if np.array_equal(xm, x) and np.array_equal(dxm, dx):
+                return dict(st)
         xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
-        return {i: self.joined(self.groups[i], self.groups[i].run("stress_lin", xj, dj))
-                for i in self.mixed_groups}
+        return {i: self._stress_lin(i, xj, dj) for i in self.mixed_groups}
 
     def merit(self, x: np.ndarray, dx: np.ndarray) -> tuple[float, float]:
         """(merit, energy) at ``x + dx``: the merit of a mixed Newton step from ``x``.
@@ -721,16 +743,24 @@ class Assembly:
         x1 = jnp.asarray(np.asarray(x) + np.asarray(dx))
         mixed = set(self.mixed_groups)
 
+        stresses: dict[int, np.ndarray] = {}
+
         def one(i: int) -> tuple[float, float]:
             g = self.groups[i]
             if i in mixed:
-                me = self.joined(g, g.run("merit_step", xj, dj)).sum(axis=0)
+                out = self.joined(g, g.run("merit_step", xj, dj))
+                stresses[i] = out[:, 2:]
+                me = out[:, :2].sum(axis=0)
                 return float(me[0]), float(me[1])
             e = float(self._per_element(g, x1).sum())
             return e, e
 
         # groups side by side as in gradient_hessian, summed in group order
         parts = list(_pool().map(one, range(len(self.groups))))
+        # the last few steps' stresses, for stress_linearized of the step a line search takes
+        # (a curved search's expansion evaluates one step past the one it keeps)
+        self._merit_stresses.appendleft((np.array(x, dtype=np.float64),
+                                         np.array(dx, dtype=np.float64), stresses))
         return sum(p[0] for p in parts), sum(p[1] for p in parts)
 
     def symmetric(self, H_upper: sp.csc_matrix) -> sp.csr_matrix:

@@ -204,8 +204,10 @@ class RunBatch:
     def stress_linearized(self, runs: Sequence[int], X: np.ndarray, dX: np.ndarray
                           ) -> list[dict[int, np.ndarray]]:
         Xj, dXj = jnp.asarray(X), jnp.asarray(dX)
-        outs = {i: self.run(runs, i, "stress_lin", Xj, dXj) for i in self.ref.mixed_groups}
-        return [{i: self._joined(i, o, r) for i, o in outs.items()} for r in range(len(runs))]
+        # the stress columns of the merit's kernel, as Assembly.stress_linearized
+        outs = {i: self.run(runs, i, "merit_step", Xj, dXj) for i in self.ref.mixed_groups}
+        return [{i: self._joined(i, o, r)[:, 2:] for i, o in outs.items()}
+                for r in range(len(runs))]
 
     #: scatter element gradients and Hessians into the runs' arrays on the device (one
     #: indexed add per chunk for all rows) instead of on the host run by run: on an
@@ -288,7 +290,7 @@ class RunBatch:
             if i in mixed:
                 outs = self.run(runs, i, "merit_step", Xj, dXj)
                 for r in range(len(runs)):
-                    me = self._joined(i, outs, r).sum(axis=0)
+                    me = self._joined(i, outs, r)[:, :2].sum(axis=0)
                     sums[r].append((float(me[0]), float(me[1])))
             else:
                 outs = self.run(runs, i, "per_element", X1)
