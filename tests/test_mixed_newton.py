@@ -166,3 +166,13 @@ def test_assembly_reuses_the_stresses_of_a_merit_evaluation():
         assert np.array_equal(again[i], fresh[i])
     assert len(calls) == len(asm.mixed_groups)  # only the step never evaluated
     assert not all(np.array_equal(other[i], fresh[i]) for i in fresh)
+    # new parameters of a rod group: the kept stresses are not theirs
+    g = asm.groups[asm.mixed_groups[0]]
+    g.set_params(*g.params)
+    calls.clear()
+    try:
+        ElementGroup.run = lambda self, *a, **k: calls.append(a) or run0(self, *a, **k)
+        asm.stress_linearized(X, dx)
+    finally:
+        ElementGroup.run = run0
+    assert len(calls) == len(asm.mixed_groups)

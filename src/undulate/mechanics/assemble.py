@@ -497,7 +497,7 @@ class Assembly:
         dof_map[self.free_dofs] = np.arange(self.n_free)
         self._dof_map = dof_map
         self._build_pattern()
-        #: (x, dx, stresses) of the last merit evaluations (see stress_linearized)
+        #: (x, dx, parameters, stresses) of the last merit evaluations (stress_linearized)
         self._merit_stresses: deque = deque(maxlen=MERIT_STRESSES_KEPT)
         from .frames import fused_frame_sets
 
@@ -724,11 +724,17 @@ class Assembly:
         A step whose merit :meth:`merit` evaluated lately (the one a line search took) has
         them already: the same numbers, from the merit's kernel.
         """
-        for xm, dxm, st in self._merit_stresses:
-            if np.array_equal(xm, x) and np.array_equal(dxm, dx):
+        params = self._mixed_params()
+        for xm, dxm, pm, st in self._merit_stresses:
+            if pm == params and np.array_equal(xm, x) and np.array_equal(dxm, dx):
                 return dict(st)
         xj, dj = jnp.asarray(x), jnp.asarray(np.asarray(dx, dtype=np.float64))
         return {i: self._stress_lin(i, xj, dj) for i in self.mixed_groups}
+
+    def _mixed_params(self) -> tuple[int, ...]:
+        # which parameters the strain-form groups had (ElementGroup.set_params replaces the
+        # tuple): kept stresses of other parameters are not reused
+        return tuple(id(self.groups[i].params) for i in self.mixed_groups)
 
     def merit(self, x: np.ndarray, dx: np.ndarray) -> tuple[float, float]:
         """(merit, energy) at ``x + dx``: the merit of a mixed Newton step from ``x``.
@@ -760,7 +766,8 @@ class Assembly:
         # the last few steps' stresses, for stress_linearized of the step a line search takes
         # (a curved search's expansion evaluates one step past the one it keeps)
         self._merit_stresses.appendleft((np.array(x, dtype=np.float64),
-                                         np.array(dx, dtype=np.float64), stresses))
+                                         np.array(dx, dtype=np.float64), self._mixed_params(),
+                                         stresses))
         return sum(p[0] for p in parts), sum(p[1] for p in parts)
 
     def symmetric(self, H_upper: sp.csc_matrix) -> sp.csr_matrix:

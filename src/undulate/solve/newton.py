@@ -603,6 +603,7 @@ def _line_search(asm: Assembly, x_fixed, u, d, v, g, M0, Hs, merit,
         if np.isfinite(M) and M < M0 + model(a):
             best = (x, M, E, a)
             break
+        # model() is the Armijo threshold, 1e-4 of the quadratic model's decrease
         a *= _curved_backtrack(M - M0, 1e4 * model(a))
     if best is None:
         return None, M0, 0.0, False
