@@ -8,14 +8,17 @@ from __future__ import annotations
 import os
 import statistics
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
-from undulate.study.presets import preset_names, resolve_study
-from undulate.study.spec import StudyError
+from undulate.study.presets import preset_names, resolve_study, setup_from
+from undulate.study.spec import Study, StudyError
+
+if TYPE_CHECKING:
+    from undulate.study.runner import RunSummary
 
 study_app = typer.Typer(
     add_completion=False,
@@ -61,18 +64,37 @@ def run_cmd(
                           "the seed) together in one worker, their evaluations batched "
                           "(for a GPU; same states as one by one)"),
     ] = 1,
+    settings: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="set-up: PATH=VALUE laid over every run's case, e.g. "
+                     "rods.E_B=10000 or 'release.clamps=[\"left\",\"right\",\"top\"]' "
+                     "(repeat for more)"),
+    ] = None,
+    setup_file: Annotated[
+        Path | None,
+        typer.Option("--setup", help="set-up: a TOML file of case tables laid over every "
+                     "run's case (--set wins over it)"),
+    ] = None,
     runner: Annotated[
         str | None,
         typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
     ] = None,
 ) -> None:
     """Run (or resume) a study into OUT; finished runs are skipped."""
-    from undulate.study.runner import RUNNER_ENV, run_study
-
     try:
-        study = resolve_study(target, quick=quick, seeds=seeds)
+        setup = setup_from(settings or [], setup_file)
+        study = resolve_study(target, quick=quick, seeds=seeds, setup=setup)
     except StudyError as err:
         _fail(str(err))
+    _run(study, out, runner=runner, workers=workers, dask=dask, retry_failed=retry_failed,
+         artifacts=not no_artifacts, batch=batch)
+
+
+def _run(study: Study, out: Path, *, runner: str | None, workers: int | None,
+         dask: str | None, retry_failed: bool, artifacts: bool, batch: int) -> RunSummary:
+    """Run a built study with progress on stderr; the run summary, or exit on an error."""
+    from undulate.study.runner import RUNNER_ENV, run_study
+
     _err.print(f"study [bold]{study.name}[/]: {len(study.runs)} runs -> {out}", highlight=False,
                soft_wrap=True)
     try:
@@ -83,7 +105,7 @@ def run_cmd(
             workers=workers,
             dask_address=dask,
             retry_failed=retry_failed,
-            artifacts=not no_artifacts,
+            artifacts=artifacts,
             progress=True,
             console=_err,
             batch=batch,
@@ -104,6 +126,86 @@ def run_cmd(
     )
     if summary.invalid_files:
         _err.print(f"[yellow]ignored {len(summary.invalid_files)} invalid record file(s)[/]")
+    return summary
+
+
+@study_app.command("sentinel")
+def sentinel_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
+    settings: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="the set-up to judge: PATH=VALUE laid over every case, "
+                     "e.g. rods.E_B=10000 (repeat for more)"),
+    ] = None,
+    setup_file: Annotated[
+        Path | None,
+        typer.Option("--setup", help="the set-up to judge as a TOML file of case tables"),
+    ] = None,
+    quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")]
+    = False,
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
+    ] = None,
+    retry_failed: Annotated[
+        bool, typer.Option("--retry-failed", help="run failed runs again")
+    ] = False,
+    runner: Annotated[
+        str | None,
+        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
+    ] = None,
+) -> None:
+    """Judge a modelling set-up against the study in minutes: 12 runs (single rods across h,
+    five rods in each corner of the (h, s) plane), then per case n, family, onset and
+    R_up/R_down beside what the study says there (also written to OUT/sentinel.md)."""
+    from undulate.study import sentinel
+    from undulate.study.storage import collect
+
+    try:
+        setup = setup_from(settings or [], setup_file)
+        study = resolve_study("sentinel", quick=quick, setup=setup)
+    except StudyError as err:
+        _fail(str(err))
+    _run(study, out, runner=runner, workers=workers, dask=None, retry_failed=retry_failed,
+         artifacts=False, batch=1)
+    rows = sentinel.judge(collect(out))
+    text = sentinel.markdown(rows, setup)
+    (out / "sentinel.md").write_text(text)
+    _print_sentinel(rows, sentinel.summary(rows))
+    _out.print(str(out / "sentinel.md"), highlight=False, soft_wrap=True)
+
+
+def _print_sentinel(rows: list[dict], s: dict) -> None:
+    from undulate.study.sentinel import ONSET_SPREAD_MAX
+
+    def mark(ok: object, what: str) -> str:
+        return "" if ok is None else (f"[green]{what}[/]" if ok else f"[red]{what}![/]")
+
+    t = Table(title="sentinel: this set-up against the study (! = MISMATCH)")
+    for col in ("case", "study: family, n", "here: family, n", "onset", "Rup/Rdn", "verdict"):
+        t.add_column(col)
+    for r in rows:
+        if r.get("status") != "ok":
+            t.add_row(r["case"], r["expect_family"], str(r.get("status")), "", "",
+                      r.get("error", ""))
+            continue
+        lo, hi = r["expect_n"]
+        ratio = r["R_up_over_down"]
+        t.add_row(r["case"], f"{r['expect_family']}, {lo if lo == hi else f'{lo}-{hi}'}",
+                  f"{r['family']}, {r['n']}",
+                  f"{r['onset']:.4f}" if r["onset"] == r["onset"] else "-",
+                  f"{ratio:.3f}" if ratio == ratio else "-",
+                  " ".join(m for m in (mark(r["family_ok"], "family"), mark(r["n_ok"], "n"),
+                                       mark(r["updown_ok"], "up/down")) if m))
+    _out.print(t)
+    spread = s["onset_spread"]
+    _out.print(
+        f"families {s['family_match']}/{s['ok']}, n {s['n_match']}/{s['ok']}, up more curved "
+        f"{s['updown_match']}/{s['updown_judged']}; single rods' onset max/min "
+        + (f"{spread:.2f}" if spread == spread else "-")
+        + f" (one critical strain: <= {ONSET_SPREAD_MAX:g}): "
+        + ("-" if s["onset_ok"] is None else "MATCH" if s["onset_ok"] else "MISMATCH"),
+        highlight=False, soft_wrap=True)
 
 
 @study_app.command("status")

@@ -10,7 +10,15 @@ single-rod-eps0            eps0 = 0.1..1.0 step 0.1 (10) x        eps0 in [0.1, 
                            h in [0.2, 0.3, 0.5]: 30 runs          h = 0.3
 parallel-phase-diagram     N = 5, h = 0.1..2.0 step 0.1 (20),     h = 0.2..2.0 step 0.6 (4),
                            s = 0..50 step 2.5 (21): 420 runs      s in [0, 10, 50]: 12
+sentinel                   6 single rods across h and 6 five-rod  the same 12 places
+                           places of the (h, s) plane: 12 runs    (:mod:`.sentinel`)
 =========================  =====================================  ==============================
+
+Every preset takes a *set-up*: a partial case dict (the same tables as a case file) laid over
+the preset's base case before its swept values, e.g. ``{"rods": {"E_B": 10000.0}}`` or
+``{"release": {"clamps": ["left", "right", "bottom", "top"]}}``. It is how a modelling choice
+is tried on a whole study (``undulate study run PRESET --set rods.E_B=10000``); the set-up is
+recorded in the study's definition and is part of every run's id.
 
 Quick variants also use a coarser, cheaper case: rods L = 60 mm, ``mesh.dx_rod = 2.0``,
 ``mesh.dx_far = 6.0``, ``mesh.dy_far = 8.0``, ``release.steps = 15``.
@@ -22,14 +30,28 @@ h = 0.1, three nodes per arc on the 2 mm mesh, and the arc fit fails there (meas
 from __future__ import annotations
 
 import copy
+import re
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from ..model.config import MATERIAL_DEFAULTS
-from .spec import Study, StudyError, build_study, frange, load_sweep_toml
+from .sentinel import SENTINEL_CASES
+from .spec import (
+    RunSpec,
+    Study,
+    StudyError,
+    build_study,
+    frange,
+    load_sweep_toml,
+    merge_case,
+    set_path,
+    validate_runs,
+)
 
-__all__ = ["PRESETS", "preset_names", "get_preset", "resolve_study", "QUICK_OVERRIDES"]
+__all__ = ["PRESETS", "preset_names", "get_preset", "resolve_study", "QUICK_OVERRIDES",
+           "parse_setting", "setup_from"]
 
 #: Changes applied to the base case of every preset in ``--quick`` mode.
 QUICK_OVERRIDES: dict[str, Any] = {
@@ -39,17 +61,8 @@ QUICK_OVERRIDES: dict[str, Any] = {
 }
 
 
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any]) -> dict[str, Any]:
+def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any],
+          setup: dict[str, Any] | None = None) -> dict[str, Any]:
     base: dict[str, Any] = {
         "fabric": {"E": MATERIAL_DEFAULTS["E"], "t": MATERIAL_DEFAULTS["t"]},
         "rods": {"b": MATERIAL_DEFAULTS["b"], "L": 100.0, "E_B": MATERIAL_DEFAULTS["E_B"],
@@ -58,7 +71,13 @@ def _base(quick: bool, rods: dict[str, Any], release: dict[str, Any]) -> dict[st
         "imperfection": {"seed": 0},
         "mode": "quasi-static",
     }
-    return _merge(base, QUICK_OVERRIDES) if quick else base
+    if setup:
+        base = merge_case(base, setup)
+    return merge_case(base, QUICK_OVERRIDES) if quick else base
+
+
+def _setup_definition(setup: dict[str, Any] | None) -> dict[str, Any]:
+    return {"setup": copy.deepcopy(setup)} if setup else {}
 
 
 #: seeds of the spread sub-grid of ``single-rod-h`` (every SPREAD_EVERY-th thickness)
@@ -66,11 +85,11 @@ SPREAD_SEEDS = (0, 1, 2)
 SPREAD_EVERY = 5
 
 
-def _single_rod_h(quick: bool, seeds: int | None) -> Study:
+def _single_rod_h(quick: bool, seeds: int | None, setup: dict[str, Any] | None) -> Study:
     hs = frange(0.2, 2.0, 0.1) if quick else frange(0.08, 2.0, 0.02)
-    base = _base(quick, {"N": 1, "h": 0.3}, {"eps0": 0.5})
+    base = _base(quick, {"N": 1, "h": 0.3}, {"eps0": 0.5}, setup)
     study = build_study("single-rod-h", base, {"rods.h": hs}, kind="preset", seeds=seeds,
-                        quick=quick)
+                        quick=quick, extra_definition=_setup_definition(setup))
     if seeds is not None or quick:
         return study
     # the spread: seeds 0, 1, 2 at every 5th thickness (seed 0 is already in the grid)
@@ -83,40 +102,60 @@ def _single_rod_h(quick: bool, seeds: int | None) -> Study:
     return study
 
 
-def _single_rod_eps0(quick: bool, seeds: int | None) -> Study:
+def _single_rod_eps0(quick: bool, seeds: int | None, setup: dict[str, Any] | None) -> Study:
     eps = [0.1, 0.3, 0.5, 1.0] if quick else frange(0.1, 1.0, 0.1)
     hs = [0.3] if quick else [0.2, 0.3, 0.5]
     return build_study(
         "single-rod-eps0",
-        _base(quick, {"N": 1, "h": 0.3}, {}),
+        _base(quick, {"N": 1, "h": 0.3}, {}, setup),
         {"rods.h": hs, "release.eps0": eps},
         kind="preset",
         seeds=seeds,
         quick=quick,
+        extra_definition=_setup_definition(setup),
     )
 
 
-def _parallel(quick: bool, seeds: int | None) -> Study:
+def _parallel(quick: bool, seeds: int | None, setup: dict[str, Any] | None) -> Study:
     # quick: 12 runs of five rods, ~1 min each on 2 cores with the real engine
     hs = frange(0.2, 2.0, 0.6) if quick else frange(0.1, 2.0, 0.1)
     ss = [0.0, 10.0, 50.0] if quick else frange(0.0, 50.0, 2.5)
     return build_study(
         "parallel-phase-diagram",
-        _base(quick, {"N": 5, "h": 0.3, "s": 10.0}, {"eps0": 0.5}),
+        _base(quick, {"N": 5, "h": 0.3, "s": 10.0}, {"eps0": 0.5}, setup),
         {"rods.h": hs, "rods.s": ss},
         kind="preset",
         seeds=seeds,
         quick=quick,
         single_rod_rule=True,
-        extra_definition={"N_nominal": 5},
+        extra_definition={"N_nominal": 5, **_setup_definition(setup)},
     )
 
 
-#: name -> builder(quick, seeds) -> Study
-PRESETS: dict[str, Callable[[bool, int | None], Study]] = {
+def _sentinel(quick: bool, seeds: int | None, setup: dict[str, Any] | None) -> Study:
+    """The twelve places of :data:`.sentinel.SENTINEL_CASES`, one run each (per seed)."""
+    base = _base(quick, {"N": 1, "h": 0.3, "s": 10.0}, {"eps0": 0.5}, setup)
+    runs: list[RunSpec] = []
+    definition: dict[str, Any] = {}
+    for c in SENTINEL_CASES:
+        one = build_study("sentinel", base, {k: [v] for k, v in c.params().items()},
+                          kind="preset", seeds=seeds, quick=quick, single_rod_rule=False,
+                          validate=False)
+        runs.extend(one.runs)
+        definition = one.definition
+    study = Study(name="sentinel", kind="preset", definition=definition, runs=runs, quick=quick)
+    study.definition.pop("sweep", None)
+    study.definition.update(cases=[c.label for c in SENTINEL_CASES], **_setup_definition(setup))
+    validate_runs(runs)
+    return study
+
+
+#: name -> builder(quick, seeds, setup) -> Study
+PRESETS: dict[str, Callable[[bool, int | None, dict[str, Any] | None], Study]] = {
     "single-rod-h": _single_rod_h,
     "single-rod-eps0": _single_rod_eps0,
     "parallel-phase-diagram": _parallel,
+    "sentinel": _sentinel,
 }
 
 
@@ -125,8 +164,10 @@ def preset_names() -> list[str]:
     return list(PRESETS)
 
 
-def get_preset(name: str, *, quick: bool = False, seeds: int | None = None) -> Study:
-    """Build a preset study; unknown names raise StudyError listing the valid ones."""
+def get_preset(name: str, *, quick: bool = False, seeds: int | None = None,
+               setup: dict[str, Any] | None = None) -> Study:
+    """Build a preset study, with an optional set-up laid over its base case (module
+    docstring); unknown names raise StudyError listing the valid ones."""
     try:
         builder = PRESETS[name]
     except KeyError:
@@ -134,14 +175,56 @@ def get_preset(name: str, *, quick: bool = False, seeds: int | None = None) -> S
             f"unknown preset {name!r}; valid presets: {', '.join(preset_names())} "
             "(or a path to a SWEEP.toml)"
         ) from None
-    return builder(quick, seeds)
+    return builder(quick, seeds, setup)
 
 
-def resolve_study(target: str, *, quick: bool = False, seeds: int | None = None) -> Study:
-    """A preset name, or a path to a SWEEP.toml (anything ending in .toml or an existing file)."""
+def resolve_study(target: str, *, quick: bool = False, seeds: int | None = None,
+                  setup: dict[str, Any] | None = None) -> Study:
+    """A preset name, or a path to a SWEEP.toml (anything ending in .toml or an existing file);
+    ``setup`` is laid over a preset's base case or a sweep's ``[base]``."""
     if target in PRESETS:
-        return get_preset(target, quick=quick, seeds=seeds)
+        return get_preset(target, quick=quick, seeds=seeds, setup=setup)
     p = Path(target)
     if target.endswith(".toml") or p.is_file():
-        return load_sweep_toml(p, seeds=seeds, quick=quick)
-    return get_preset(target, quick=quick, seeds=seeds)
+        return load_sweep_toml(p, seeds=seeds, quick=quick, setup=setup)
+    return get_preset(target, quick=quick, seeds=seeds, setup=setup)
+
+
+_BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+
+
+def parse_setting(text: str) -> tuple[str, Any]:
+    """``"rods.E_B=10000"`` -> ``("rods.E_B", 10000)``: a dotted path and a TOML value
+    (numbers, true/false, "strings", [lists]); a bare word such as ``inertial`` is a string."""
+    path, sep, raw = text.partition("=")
+    path, raw = path.strip(), raw.strip()
+    if not sep or not path or not raw:
+        raise StudyError(f"--set {text!r}: give PATH=VALUE, e.g. rods.E_B=10000")
+    if not all(_BARE_WORD.fullmatch(part) for part in path.split(".")):
+        raise StudyError(f"--set {text!r}: {path!r} is not a dotted path such as rods.E_B")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if not _BARE_WORD.fullmatch(raw):
+            raise StudyError(f"--set {text!r}: {raw!r} is not a TOML value (numbers, true/false, "
+                             '"text", [lists])') from None
+        value = raw
+    return path, value
+
+
+def setup_from(settings: list[str], file: str | Path | None = None) -> dict[str, Any] | None:
+    """A set-up dict from a TOML file (tables as in a case file) and ``PATH=VALUE`` settings
+    laid over it; None when both are empty."""
+    setup: dict[str, Any] = {}
+    if file is not None:
+        p = Path(file)
+        if not p.is_file():
+            raise StudyError(f"--setup {p}: no such file")
+        try:
+            setup = tomllib.loads(p.read_text())
+        except tomllib.TOMLDecodeError as err:
+            raise StudyError(f"--setup {p}: not valid TOML: {err}") from None
+    for text in settings:
+        path, value = parse_setting(text)
+        set_path(setup, path, value)
+    return setup or None

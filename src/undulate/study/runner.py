@@ -378,6 +378,13 @@ def _check_study_dir(out: Path, study: Study) -> None:
             f"{out} already holds study {old.get('name')!r} (quick={bool(old.get('quick'))}); "
             f"use another --out for {study.name!r} (quick={study.quick})"
         )
+    before = (old.get("definition") or {}).get("setup") or {}
+    now = study.definition.get("setup") or {}
+    if before != now:
+        raise StudyError(
+            f"{out} already holds study {study.name!r} on the set-up {before or 'of the defaults'}"
+            f"; use another --out for the set-up {now or 'of the defaults'}"
+        )
 
 
 def run_study(

@@ -32,6 +32,7 @@ __all__ = [
     "apply_single_rod_rule",
     "build_study",
     "load_sweep_toml",
+    "merge_case",
 ]
 
 SEED_PATH = "imperfection.seed"
@@ -258,6 +259,17 @@ def validate_runs(runs: list[RunSpec]) -> None:
             raise StudyError(f"run {i + 1}/{len(runs)} ({label}): {first}") from None
 
 
+def merge_case(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``over`` laid over ``base``, table by table (neither is changed)."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = merge_case(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
 def _flatten_sweep(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     """``{"rods": {"h": [..]}}`` and ``{"rods.h": [..]}`` both give ``{"rods.h": [..]}``."""
     out: dict[str, Any] = {}
@@ -271,13 +283,15 @@ def _flatten_sweep(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def load_sweep_toml(
-    path: str | Path, *, seeds: int | None = None, quick: bool = False, validate: bool = True
+    path: str | Path, *, seeds: int | None = None, quick: bool = False, validate: bool = True,
+    setup: dict[str, Any] | None = None,
 ) -> Study:
     """Read a SWEEP.toml: ``[base]`` (a case dict), ``[sweep]`` (dotted path -> list or range).
 
     Optional top-level ``name = "..."`` and ``[options]`` with ``seeds`` (int or list) and
     ``single_rod_rule`` (bool, default true: ``s = 0`` with ``N > 1`` means one rod ``N*b``
-    wide). ``quick`` is recorded but does not change a user sweep.
+    wide). ``quick`` is recorded but does not change a user sweep. ``setup`` (a partial case
+    dict) is laid over ``[base]``.
     """
     p = Path(path)
     if not p.is_file():
@@ -293,6 +307,8 @@ def load_sweep_toml(
     base = data.get("base", {})
     if not isinstance(base, dict):
         raise StudyError(f"{p}: [base] must be a table")
+    if setup:
+        base = merge_case(base, setup)
     raw = data.get("sweep")
     if not isinstance(raw, dict) or not raw:
         raise StudyError(f"{p}: a non-empty [sweep] table is required")
@@ -311,6 +327,6 @@ def load_sweep_toml(
         seeds=n_seeds,
         single_rod_rule=bool(opts.get("single_rod_rule", True)),
         quick=quick,
-        extra_definition={"source": str(p)},
+        extra_definition={"source": str(p), **({"setup": setup} if setup else {})},
         validate=validate,
     )
