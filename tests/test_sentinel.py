@@ -82,6 +82,14 @@ def test_judge_marks_matches_and_mismatches() -> None:
     assert "five-1.6-50" in text and "MISMATCH" in text and "E_B" in text
     # a missing run is reported, not judged
     assert sentinel.judge(df.drop(index=k))[k]["status"] == "missing"
+    # candidates side by side: scores per row, the wrong case starred
+    table = sentinel.compare_markdown([("good", None, sentinel.judge(df)),
+                                       ("bad", {"rods": {"E_B": 1e4}}, judged)])
+    good_row = next(ln for ln in table.splitlines() if ln.startswith("| good"))
+    bad_row = next(ln for ln in table.splitlines() if ln.startswith("| bad"))
+    n_cases = len(sentinel.SENTINEL_CASES)
+    assert f"{n_cases}/{n_cases}" in good_row and "*" not in good_row
+    assert f"{n_cases - 1}/{n_cases}" in bad_row and bad_row.endswith("c3* |")
 
 
 def test_expected_n_from_eq1() -> None:

@@ -313,3 +313,44 @@ def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monk
     s = run_study(_small_study([0.3, 0.5, 0.7]), tmp_path / "b",
                   run_fn="_study_fakes:crash_run", workers=1, progress=False, artifacts=False)
     assert (s.ok, s.failed) == (2, 1)  # the study outlived the crash
+
+
+def test_workers_end_with_a_killed_driver(tmp_path: Path) -> None:
+    """A study whose driver is killed (SIGKILL: no clean-up) leaves no worker running on."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("parent-death signal: Linux only")
+    starts = tmp_path / "starts.txt"
+    script = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from undulate.study import build_study, run_study
+        study = build_study("k", {{"rods": {{"N": 1}}}}, {{"rods.h": [0.2, 0.3, 0.4, 0.5]}},
+                            kind="sweep")
+        run_study(study, {str(tmp_path / "out")!r}, run_fn="_study_fakes:slow_run", workers=2,
+                  progress=False)
+    """)
+    env = {**os.environ, "UNDULATE_FAKE_SLEEP": "60", "UNDULATE_FAKE_STARTS": str(starts)}
+    driver = subprocess.Popen([sys.executable, "-c", script], env=env)
+    deadline = time.time() + 120
+    while time.time() < deadline and (not starts.exists()
+                                      or len(starts.read_text().split()) < 2):
+        time.sleep(0.2)
+    assert starts.exists() and len(starts.read_text().split()) == 2, "workers did not start"
+    kids = subprocess.run(["pgrep", "-P", str(driver.pid)], capture_output=True, text=True)
+    pids = [int(p) for p in kids.stdout.split()]
+    assert pids
+    driver.send_signal(signal.SIGKILL)
+    driver.wait()
+    time.sleep(3)
+    alive = [p for p in pids if os.path.exists(f"/proc/{p}") and
+             "zombie" not in open(f"/proc/{p}/status").read().lower()]
+    for p in alive:  # clean up before failing
+        os.kill(p, signal.SIGKILL)
+    assert not alive, f"workers {alive} ran on after their driver was killed"

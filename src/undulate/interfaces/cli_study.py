@@ -175,6 +175,30 @@ def sentinel_cmd(
     _out.print(str(out / "sentinel.md"), highlight=False, soft_wrap=True)
 
 
+@study_app.command("compare")
+def compare_cmd(
+    directories: Annotated[list[Path], typer.Argument(help="sentinel study directories")],
+    out: Annotated[Path | None, typer.Option("--out", help="also write the table here")]
+    = None,
+) -> None:
+    """Candidate set-ups side by side: several sentinel directories judged against the study,
+    one row each (scores, then each case's family and n)."""
+    from undulate.study import sentinel
+    from undulate.study.storage import collect, read_study
+
+    entries = []
+    for d in directories:
+        meta = read_study(d)
+        if meta is None or meta.get("name") != "sentinel":
+            _fail(f"{d}: not a sentinel study directory (run: undulate study sentinel --out {d})")
+        setup = (meta.get("definition") or {}).get("setup")
+        entries.append((d.name, setup, sentinel.judge(collect(d))))
+    text = sentinel.compare_markdown(entries)
+    if out is not None:
+        out.write_text(text)
+    _out.print(text, highlight=False, soft_wrap=True, markup=False)
+
+
 def _print_sentinel(rows: list[dict], s: dict) -> None:
     from undulate.study.sentinel import ONSET_SPREAD_MAX
 

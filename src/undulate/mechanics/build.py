@@ -87,13 +87,14 @@ def lateral_stretch(eps0: float, nu: float, *, orthotropic: bool = False) -> flo
 
 def fabric_groups(mesh: FabricMesh, E: float | FabricLaw, nu: float | None = None,
                   t: float = 0.4, *, E_y: float | None = None, G: float | None = None,
-                  direction: float = 0.0) -> list[ElementGroup]:
+                  direction: float = 0.0, bending_factor: float = 1.0) -> list[ElementGroup]:
     """Membrane (per triangle) and bending (per interior edge) groups of the fabric.
 
     ``E``: a :class:`~undulate.mechanics.material.FabricLaw`, or the scalars of
     :func:`~undulate.mechanics.material.fabric_law` (E, nu and, for an orthotropic knit,
     ``E_y`` and ``G``: E along the stretch, at ``direction`` degrees in the mesh's frame). The
-    hinges' bending stiffness uses the law's bending modulus (sqrt(E E_y) for the knit)."""
+    hinges' bending stiffness uses the law's bending modulus (sqrt(E E_y) for the knit),
+    times ``bending_factor`` (a knit bends more easily than a continuum sheet)."""
     from ..mesh import stretch_rotation
 
     if isinstance(E, int | float):
@@ -118,7 +119,7 @@ def fabric_groups(mesh: FabricMesh, E: float | FabricLaw, nu: float | None = Non
     e_len2 = np.sum((X[hin[:, 1]] - X[hin[:, 0]]) ** 2, axis=1)
     a_a = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 2]] - X[hin[:, 0]]))
     a_b = 0.5 * np.abs(_cross2(X[hin[:, 1]] - X[hin[:, 0]], X[hin[:, 3]] - X[hin[:, 0]]))
-    D = E_bend * t**3 / (12.0 * (1.0 - nu**2))
+    D = bending_factor * E_bend * t**3 / (12.0 * (1.0 - nu**2))
     k = D * mesh.hinge_factor * e_len2 / (a_a + a_b)
     bending = ElementGroup("fabric_bending", hinge_bending, hin, (k,))
     return [membrane, bending]

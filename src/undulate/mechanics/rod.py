@@ -111,14 +111,23 @@ def vertex_strains(x15: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:
 
 
 def node_strains(x5: jnp.ndarray) -> jnp.ndarray:
-    """Footprint strains at one rod node: (width stretch ratio, shear, offset of p from middle)."""
+    """Footprint strains at one rod node: (width, shear, offset of p from the middle of qm-qp
+    along the rod, across it and along the normal). The offset is measured in the node's own
+    frame, so the footprint energy does not change when rod and fabric turn together (in the
+    drawing's frame, the offset a mesh leaves at printing, ~1e-3 mm, made a free sample that
+    rolls up carry a spurious moment)."""
     pa, pb, p, qp, qm = x5[0], x5[1], x5[2], x5[3], x5[4]
     w = qp - qm
     tvec = pb - pa
     width = jnp.linalg.norm(w)
-    shear = jnp.dot(w, tvec) / (width * jnp.linalg.norm(tvec))
+    tlen = jnp.linalg.norm(tvec)
+    shear = jnp.dot(w, tvec) / (width * tlen)
     mid = p - 0.5 * (qp + qm)
-    return jnp.concatenate([jnp.stack([width, shear]), mid])
+    t_hat = tvec / tlen
+    n_hat = _unit(jnp.cross(tvec, w))
+    b_hat = jnp.cross(n_hat, t_hat)
+    local = jnp.stack([jnp.dot(mid, t_hat), jnp.dot(mid, b_hat), jnp.dot(mid, n_hat)])
+    return jnp.concatenate([jnp.stack([width, shear]), local])
 
 
 def _stretch_q(q: jnp.ndarray, d: jnp.ndarray, L0: jnp.ndarray, EA: jnp.ndarray) -> jnp.ndarray:

@@ -95,6 +95,12 @@ class Fabric(_Strict):
         "(release.clamps), outwards, from the pre-stretch on [N per mm of unstretched edge] "
         "(0: free edges)",
     )
+    bending_factor: float = Field(
+        1.0, gt=0.0, le=10.0,
+        description="the knit's bending stiffness as a fraction of a continuum sheet's E t^3 "
+        "/ (12 (1 - nu^2)) [-]: a knit of loops bends much more easily than a solid sheet of "
+        "the same E and t (1: continuum sheet)",
+    )
     rho: float = Field(1.2e-9, gt=0.0, description="density [t/mm^3] (inertial mode only)")
     margin_x: float = Field(
         20.0, ge=2.0, le=1e4, description="fabric beyond the rod ends along x, printed state [mm]"
@@ -166,6 +172,13 @@ class Rods(_Strict):
     E_B: float = Field(3000.0, gt=0.0, le=1e6, description="rod Young's modulus [MPa]")
     nu_B: float = Field(0.35, ge=0.0, lt=0.5, description="rod Poisson ratio [-]")
     rho_B: float = Field(1.24e-9, gt=0.0, description="rod density [t/mm^3] (inertial mode)")
+    offset: float | None = Field(
+        None, ge=0.0, le=20.0,
+        description="height of the rods' centre line above the fabric's mid-surface [mm] "
+        "(not set: (t + h) / 2, the rod lying on the fabric; 0: a control with the centre "
+        "line on the mid-surface, no bilayer: the flat state stays exactly flat until it "
+        "buckles)",
+    )
     N: int = Field(1, ge=1, le=200, description="number of parallel rods")
     s: float = Field(
         10.0, ge=0.0, le=1e4, description="edge-to-edge gap between parallel rods [mm]"
@@ -468,6 +481,13 @@ class Release(_Strict):
 
 
 
+    control: Literal["displacement", "force"] = Field(
+        "displacement",
+        description="displacement: the clamps move back and hold the edges to the end; "
+        "force: after the pre-stretch the clamps let go and their forces, as loads on the "
+        "free edges, are taken down to zero (or to final_strain / eps0 of them), so the "
+        "sample ends free, as one cut off its frame (quasi-static only)",
+    )
     clamps: list[Edge] = Field(
         default_factory=lambda: ["left", "right"],
         description="edges held by the frame during the pre-stretch and the release: 'left' "
@@ -663,6 +683,17 @@ class Case(_Strict):
         if self.fabric.edge_tension > 0 and {"bottom", "top"} <= set(self.release.clamps):
             raise ValueError("fabric.edge_tension: pulls on the edges across the stretch that "
                              "are free, but release.clamps holds both bottom and top")
+        return self
+
+    @model_validator(mode="after")
+    def _force_release(self) -> Case:
+        if self.release.control == "force":
+            if self.mode == "inertial":
+                raise ValueError("release.control: 'force' is quasi-static only; use mode = "
+                                 "'quasi-static' or control = 'displacement'")
+            if self.hang is not None:
+                raise ValueError("release.control: with 'force' the sample ends free (no "
+                                 "clamp is left to let go): remove [hang]")
         return self
 
     @model_validator(mode="after")

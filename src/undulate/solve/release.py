@@ -43,11 +43,13 @@ from ..mechanics.fabric import dead_load
 from ..mechanics.material import FabricLaw, fabric_law
 from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
+from .boundary import Boundary, clamp_positions, clamped_nodes, edge_nodes, make_boundary
 from .linear import SingularMatrixError, make_solver, single_threaded_blas
 from .newton import ConvergenceError, NewtonOptions, minimize
 from .terms import TermState, groups
 
-__all__ = ["Simulation", "SimResult", "prepare", "run_release", "imperfection_field"]
+__all__ = ["Simulation", "SimResult", "prepare", "run_release", "imperfection_field",
+           "clamp_positions", "edge_nodes"]
 
 ProgressFn = Callable[[float, dict], None]
 
@@ -124,7 +126,7 @@ def prepare(case: Case) -> Simulation:
         dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading, kind=m.kind,
         h_far=m.h_far, direction=case.release.direction,
     )
-    secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t) for p in paths]
+    secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t, d=r.offset) for p in paths]
     across = [e for e in ("bottom", "top") if e in case.release.clamps]
     if len(across) == 1 and lam_y != 1.0:
         # one edge across the stretch held (at its printed place): the homogeneous state
@@ -141,30 +143,8 @@ def prepare(case: Case) -> Simulation:
     return sim
 
 
-def edge_nodes(mesh: FabricMesh, edges: list[str] | tuple[str, ...]) -> np.ndarray:
-    """Mask of the nodes on the named edges ("left", "right", "bottom", "top": stretch frame)."""
-    mask = np.zeros(mesh.n_nodes, dtype=bool)
-    for name in edges:
-        mask[mesh.node_sets[name]] = True
-    return mask
-
-
-def _clamped(sim: Simulation) -> np.ndarray:
-    """Nodes held by the frame during the pre-stretch and the release (``release.clamps``)."""
-    return edge_nodes(sim.mesh, sim.case.release.clamps)
-
-
-def clamp_positions(sim: Simulation, e: float, x: np.ndarray) -> np.ndarray:
-    """Copy of ``x`` with the clamped edges at clamp strain ``e`` (stretch frame: x scaled,
-    y and z at their reference values)."""
-    out = x.copy()
-    clamp = _clamped(sim)
-    rot = sim.rotation
-    u = sim.X3[clamp] @ rot  # reference, stretch frame
-    u[:, 0] *= 1.0 + e
-    u[:, 2] = 0.0
-    out[clamp] = u @ rot.T
-    return out
+#: the frame's nodes during the pre-stretch (kept under its old name for the tests and benchmarks)
+_clamped = clamped_nodes
 
 
 def imperfection_field(n: int, dx: float, amplitude: float, correlation: float,
@@ -249,8 +229,8 @@ def _run_release(case: Case, progress: ProgressFn | None,
                          negative_curvature=so.negative_curvature,
                          linear_solver=so.linear_solver, modes=so.modes)
     x_print, pre = prestretch(sim, opts)
-    fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
-    fixed[_clamped(sim)] = True
+    boundary = make_boundary(sim, x_print)
+    fixed = boundary.fixed
     rng = np.random.default_rng(case.imperfection.seed)
     x = x_print.copy()
     imp = case.imperfection
@@ -262,7 +242,7 @@ def _run_release(case: Case, progress: ProgressFn | None,
     # from the start of the release on
     rest = x if imp.kind == "printed" else x_print
     printed = groups(sim, ("print",), TermState(rest, ~fixed.all(axis=1)))
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed, fixed)
+    asm = Assembly(sim.mesh.n_nodes, sim.fabric + printed + boundary.groups(), fixed)
     if assembly is not None:
         asm = assembly(asm)
     t_setup = time.perf_counter() - t_start
@@ -271,7 +251,7 @@ def _run_release(case: Case, progress: ProgressFn | None,
 
         x, history, stats = release_inertial(sim, asm, x, opts, progress)
     else:
-        x, history, stats = _release_quasistatic(sim, asm, x, opts, progress)
+        x, history, stats = _release_quasistatic(sim, asm, x, opts, progress, boundary)
     if case.hang is not None:
         asm, x = hang(sim, rest, x, opts, history, stats, progress)
     stats.update(
@@ -441,8 +421,10 @@ def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, 
 
 
 def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
-                         progress: ProgressFn | None) -> tuple[np.ndarray, list[dict], dict]:
+                         progress: ProgressFn | None, boundary: Boundary | None = None
+                         ) -> tuple[np.ndarray, list[dict], dict]:
     rel = sim.case.release
+    bd = boundary if boundary is not None else make_boundary(sim, x)
     eps0 = rel.eps0
     e_end = rel.final_strain  # the clamps stop here (0: a full release)
     de_nom = (eps0 - e_end) / rel.steps
@@ -486,10 +468,10 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # energy is lower but it is farther from the branch: 311 against 270 iterations).
         x_pred = _affine_predictor(x, e_old, e_new, on_rod, rod_nodes,
                                    sim.rotation if rel.direction else None)
-        x_pred = clamp_positions(sim, e_new, x_pred)
+        x_pred = bd.place(e_new, x_pred)
         if x_prev is not None and e_prev is not None and e_prev != e_old and e_old != e_new:
             x_sec = x + (x - x_prev) * ((e_old - e_new) / (e_prev - e_old))
-            x_sec = clamp_positions(sim, e_new, x_sec)
+            x_sec = bd.place(e_new, x_sec)
             if asm.energy(x_sec) < 2.0 * asm.energy(x_pred):
                 x_pred = x_sec
         if chord_ready:
@@ -530,7 +512,8 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         x_prev, e_prev = x, e_old
         x = asm.full(res.u, x_pred)
         e = e_new
-        rec = dict(step=len(history), release_strain=eps0 - e, clamp_strain=e,
+        e_measured = bd.strain(e, x)
+        rec = dict(step=len(history), release_strain=eps0 - e_measured, clamp_strain=e_measured,
                    energy=res.energy, **_heights(sim, x),
                    newton_iterations=res.iterations, negative_steps=res.negative_steps,
                    rod_negative_steps=res.watched_steps, residual=res.residual)

@@ -56,7 +56,8 @@ class EnergyTerm:
 
 def _fabric(sim: Simulation, state: TermState) -> list[ElementGroup]:
     return fabric_groups(sim.mesh, sim.law, t=sim.case.fabric.t,
-                         direction=sim.case.release.direction)
+                         direction=sim.case.release.direction,
+                         bending_factor=sim.case.fabric.bending_factor)
 
 
 def _edge_tension(sim: Simulation, state: TermState) -> list[ElementGroup]:

@@ -555,6 +555,27 @@ def _init_worker(path: list[str], pardiso_threads: int | None = None) -> None:
     # on a GPU, JAX takes 75 % of its memory up front per process: workers sharing one GPU
     # take what they use instead (no effect on a CPU)
     os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+    _die_with_parent()
+
+
+def _die_with_parent() -> None:
+    """On Linux, end this worker when the driver process ends, however it ends (a SIGKILL, a
+    closed terminal): otherwise workers of a killed study ran on, orphaned, to the end of
+    their runs (measured: two five-rod runs still computing 20 min after their driver was
+    killed). Elsewhere the pool's own shutdown is all there is."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    parent = os.getppid()
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the driver died before the call above: go now
+        os._exit(1)
 
 
 def _run_pool(

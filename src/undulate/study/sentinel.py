@@ -46,6 +46,7 @@ __all__ = [
     "judge",
     "summary",
     "markdown",
+    "compare_markdown",
 ]
 
 #: "the same onset for all h": largest max / min of the single rods' onset release strains
@@ -241,3 +242,35 @@ def markdown(rows: list[dict[str, Any]], setup: dict[str, Any] | None = None) ->
         "",
     ]
     return "\n".join(lines)
+
+
+def compare_markdown(entries: list[tuple[str, dict[str, Any] | None, list[dict[str, Any]]]]
+                     ) -> str:
+    """Candidate set-ups side by side: one row per candidate (``entries``: label, set-up,
+    :func:`judge` rows), its scores, then each case's family and n (``*`` where it differs
+    from the study)."""
+    labels = [c.label for c in SENTINEL_CASES]
+    head = ("| candidate | set-up | families | n | up/down | onset min-max (max/min) | "
+            + " | ".join(labels) + " |")
+    lines = ["## Sentinel: candidate set-ups against the study", "",
+             "Each case: family initial and n (w waves, c coherent, i independent, r rolls, "
+             "b bends; * where the family or n differs from the study).", "", head,
+             "|" + "---|" * (5 + len(labels))]
+    study = " | ".join("/".join(f[0] for f in c.families) for c in SENTINEL_CASES)
+    lines.append(f"| the study | | | | R_up < R_down | one strain | {study} |")
+    for label, setup, rows in entries:
+        s = summary(rows)
+        cells = []
+        for r in rows:
+            if r.get("status") != "ok":
+                cells.append(str(r.get("status")))
+                continue
+            star = "" if (r["family_ok"] and r["n_ok"]) else "*"
+            cells.append(f"{(r['family'] or '?')[0]}{r['n']}{star}")
+        onset = (f"{_g(s['onset_min'], '.3f')}-{_g(s['onset_max'], '.3f')} "
+                 f"({_g(s['onset_spread'], '.2f')})")
+        lines.append(
+            f"| {label} | `{setup or {}}` | {s['family_match']}/{s['ok']} | "
+            f"{s['n_match']}/{s['ok']} | {s['updown_match']}/{s['updown_judged']} | {onset} | "
+            + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
