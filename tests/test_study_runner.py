@@ -343,8 +343,14 @@ def test_workers_end_with_a_killed_driver(tmp_path: Path) -> None:
                                       or len(starts.read_text().split()) < 2):
         time.sleep(0.2)
     assert starts.exists() and len(starts.read_text().split()) == 2, "workers did not start"
-    kids = subprocess.run(["pgrep", "-P", str(driver.pid)], capture_output=True, text=True)
-    pids = [int(p) for p in kids.stdout.split()]
+    def parent_of(pid: str) -> int:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            return -1
+        return int(stat.rsplit(")", 1)[1].split()[1])
+
+    pids = [int(p) for p in os.listdir("/proc") if p.isdigit() and parent_of(p) == driver.pid]
     assert pids
     driver.send_signal(signal.SIGKILL)
     driver.wait()
