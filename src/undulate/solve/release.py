@@ -421,10 +421,9 @@ def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, 
 
 
 def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
-                         progress: ProgressFn | None, boundary: Boundary | None = None
+                         progress: ProgressFn | None, bd: Boundary
                          ) -> tuple[np.ndarray, list[dict], dict]:
     rel = sim.case.release
-    bd = boundary if boundary is not None else make_boundary(sim, x)
     eps0 = rel.eps0
     e_end = rel.final_strain  # the clamps stop here (0: a full release)
     de_nom = (eps0 - e_end) / rel.steps

@@ -46,6 +46,7 @@ from .spec import (
     frange,
     load_sweep_toml,
     merge_case,
+    read_toml,
     set_path,
     validate_runs,
 )
@@ -217,13 +218,7 @@ def setup_from(settings: list[str], file: str | Path | None = None) -> dict[str,
     laid over it; None when both are empty."""
     setup: dict[str, Any] = {}
     if file is not None:
-        p = Path(file)
-        if not p.is_file():
-            raise StudyError(f"--setup {p}: no such file")
-        try:
-            setup = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as err:
-            raise StudyError(f"--setup {p}: not valid TOML: {err}") from None
+        setup = read_toml(Path(file), "--setup ")
     for text in settings:
         path, value = parse_setting(text)
         set_path(setup, path, value)

@@ -282,6 +282,17 @@ def _flatten_sweep(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def read_toml(p: Path, label: str = "") -> dict[str, Any]:
+    """The tables of TOML file ``p``; a StudyError naming it (after ``label``, e.g. an
+    option) when it is missing or not valid TOML."""
+    if not p.is_file():
+        raise StudyError(f"{label}{p}: no such file")
+    try:
+        return tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise StudyError(f"{label}{p}: not valid TOML: {err}") from None
+
+
 def load_sweep_toml(
     path: str | Path, *, seeds: int | None = None, quick: bool = False, validate: bool = True,
     setup: dict[str, Any] | None = None,
@@ -294,12 +305,7 @@ def load_sweep_toml(
     dict) is laid over ``[base]``.
     """
     p = Path(path)
-    if not p.is_file():
-        raise StudyError(f"{p}: no such file")
-    try:
-        data = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise StudyError(f"{p}: not valid TOML: {err}") from None
+    data = read_toml(p)
     unknown = set(data) - {"name", "base", "sweep", "options"}
     if unknown:
         raise StudyError(f"{p}: unknown top-level keys {sorted(unknown)} (allowed: name, base, "
