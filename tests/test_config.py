@@ -88,6 +88,6 @@ def test_material_defaults_are_set_once():
     sig = inspect.signature(theory.l).parameters
     assert {k: sig[k].default for k in MATERIAL_DEFAULTS} == MATERIAL_DEFAULTS
     assert {k: PARAM_ALIASES[k][1] for k in MATERIAL_DEFAULTS} == MATERIAL_DEFAULTS
-    run = get_preset("single-rod-h").runs[0].case
+    run = get_preset("single-rod-h", setup="bare").runs[0].case
     assert (run["rods"]["b"], run["rods"]["E_B"], run["fabric"]["E"], run["fabric"]["t"]) == \
         tuple(MATERIAL_DEFAULTS[k] for k in ("b", "E_B", "E", "t"))

@@ -25,7 +25,7 @@ def test_setup_is_laid_under_every_run_and_changes_ids() -> None:
     plain = get_preset("sentinel")
     stiff = get_preset("sentinel", setup={"rods": {"E_B": 10000.0}})
     assert all(r.case["rods"]["E_B"] == 10000.0 for r in stiff.runs)
-    assert all(r.case["rods"]["E_B"] == 3000.0 for r in plain.runs)
+    assert all(r.case["rods"]["E_B"] == 1000.0 for r in plain.runs)  # the reference set-up
     assert not {r.id for r in plain.runs} & {r.id for r in stiff.runs}
     assert stiff.definition["setup"] == {"rods": {"E_B": 10000.0}}
     # the case's own h wins over a set-up's
@@ -109,6 +109,6 @@ def test_other_setup_in_same_dir_refused(tmp_path) -> None:
     plain = get_preset("single-rod-eps0", quick=True)
     run_study(plain, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
     other = get_preset("single-rod-eps0", quick=True, setup={"rods": {"E_B": 10000.0}})
-    with pytest.raises(StudyError, match="on the set-up of the defaults"):
+    with pytest.raises(StudyError, match="on the set-up study-2022"):
         run_study(other, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
     run_study(plain, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)  # same: ok

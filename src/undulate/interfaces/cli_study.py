@@ -14,6 +14,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from undulate.study.named_setups import REFERENCE, setup_names
 from undulate.study.presets import preset_names, resolve_study, setup_from
 from undulate.study.spec import Study, StudyError
 
@@ -34,6 +35,21 @@ _err = Console(stderr=True)
 def _fail(msg: str, code: int = 2) -> None:
     _err.print(f"[red]error:[/] {msg}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
+
+
+#: ``--set`` and ``--setup``, shared by ``study run`` and ``study sentinel``
+SetOption = Annotated[
+    list[str] | None,
+    typer.Option("--set", help="set-up: PATH=VALUE laid over every run's case (after --setup), "
+                 "e.g. rods.E_B=10000 or 'release.clamps=[\"left\",\"right\",\"top\"]' "
+                 "(repeat for more)"),
+]
+SetupOption = Annotated[
+    str | None,
+    typer.Option("--setup", help="set-up laid over every run's case: a shipped name ("
+                 + ", ".join(setup_names()) + f") or a TOML file of case tables \\[presets: "
+                 f"{REFERENCE}; a SWEEP.toml: none]"),
+]
 
 
 @study_app.command("run")
@@ -64,17 +80,8 @@ def run_cmd(
                           "the seed) together in one worker, their evaluations batched "
                           "(for a GPU; same states as one by one)"),
     ] = 1,
-    settings: Annotated[
-        list[str] | None,
-        typer.Option("--set", help="set-up: PATH=VALUE laid over every run's case, e.g. "
-                     "rods.E_B=10000 or 'release.clamps=[\"left\",\"right\",\"top\"]' "
-                     "(repeat for more)"),
-    ] = None,
-    setup_file: Annotated[
-        Path | None,
-        typer.Option("--setup", help="set-up: a TOML file of case tables laid over every "
-                     "run's case (--set wins over it)"),
-    ] = None,
+    settings: SetOption = None,
+    setup_file: SetupOption = None,
     runner: Annotated[
         str | None,
         typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
@@ -82,7 +89,7 @@ def run_cmd(
 ) -> None:
     """Run (or resume) a study into OUT; finished runs are skipped."""
     try:
-        setup = setup_from(settings or [], setup_file)
+        setup = setup_from(settings or [], setup_file, preset=target in preset_names())
         study = resolve_study(target, quick=quick, seeds=seeds, setup=setup)
     except StudyError as err:
         _fail(str(err))
@@ -132,15 +139,8 @@ def _run(study: Study, out: Path, *, runner: str | None, workers: int | None,
 @study_app.command("sentinel")
 def sentinel_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
-    settings: Annotated[
-        list[str] | None,
-        typer.Option("--set", help="the set-up to judge: PATH=VALUE laid over every case, "
-                     "e.g. rods.E_B=10000 (repeat for more)"),
-    ] = None,
-    setup_file: Annotated[
-        Path | None,
-        typer.Option("--setup", help="the set-up to judge as a TOML file of case tables"),
-    ] = None,
+    settings: SetOption = None,
+    setup_file: SetupOption = None,
     quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")]
     = False,
     workers: Annotated[
@@ -162,7 +162,7 @@ def sentinel_cmd(
     from undulate.study.storage import collect
 
     try:
-        setup = setup_from(settings or [], setup_file)
+        setup = setup_from(settings or [], setup_file, preset=True)
         study = resolve_study("sentinel", quick=quick, setup=setup)
     except StudyError as err:
         _fail(str(err))
@@ -173,6 +173,26 @@ def sentinel_cmd(
     (out / "sentinel.md").write_text(text)
     _print_sentinel(rows, sentinel.summary(rows))
     _out.print(str(out / "sentinel.md"), highlight=False, soft_wrap=True)
+
+
+@study_app.command("setups")
+def setups_cmd(
+    name: Annotated[str | None, typer.Argument(help="print this set-up's TOML (with why)")]
+    = None,
+) -> None:
+    """The shipped set-ups (--setup NAME): their names, or one's TOML text, comments included."""
+    from undulate.study.named_setups import describe_setup, named_setup, setup_text
+
+    try:
+        if name is not None:
+            _out.print(setup_text(name), highlight=False, soft_wrap=True, markup=False)
+            return
+        for n in setup_names():
+            mark = "  (the presets' reference)" if n == REFERENCE else ""
+            _out.print(f"{describe_setup(named_setup(n))}{mark}", highlight=False,
+                       soft_wrap=True, markup=False)
+    except StudyError as err:
+        _fail(str(err))
 
 
 @study_app.command("compare")

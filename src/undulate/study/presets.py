@@ -18,7 +18,9 @@ Every preset takes a *set-up*: a partial case dict (the same tables as a case fi
 the preset's base case before its swept values, e.g. ``{"rods": {"E_B": 10000.0}}`` or
 ``{"release": {"clamps": ["left", "right", "bottom", "top"]}}``. It is how a modelling choice
 is tried on a whole study (``undulate study run PRESET --set rods.E_B=10000``); the set-up is
-recorded in the study's definition and is part of every run's id.
+recorded in the study's definition and is part of every run's id. Unless told otherwise a
+preset runs on the reference set-up, ``study-2022`` (:mod:`.named_setups`: E_B = 1000 MPa,
+chosen on the sentinel); ``setup="bare"`` runs it on the engine's defaults.
 
 Quick variants also use a coarser, cheaper case: rods L = 60 mm, ``mesh.dx_rod = 2.0``,
 ``mesh.dx_far = 6.0``, ``mesh.dy_far = 8.0``, ``release.steps = 15``.
@@ -37,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from ..model.config import MATERIAL_DEFAULTS
+from .named_setups import REFERENCE, is_setup_name, named_setup, setup_names
 from .sentinel import SENTINEL_CASES
 from .spec import (
     RunSpec,
@@ -166,9 +169,11 @@ def preset_names() -> list[str]:
 
 
 def get_preset(name: str, *, quick: bool = False, seeds: int | None = None,
-               setup: dict[str, Any] | None = None) -> Study:
-    """Build a preset study, with an optional set-up laid over its base case (module
-    docstring); unknown names raise StudyError listing the valid ones."""
+               setup: dict[str, Any] | str | None = None) -> Study:
+    """Build a preset study with a set-up laid over its base case (module docstring):
+    ``None`` for the reference set-up (:data:`.named_setups.REFERENCE`), a shipped name such as
+    ``"bare"`` (the engine's defaults), or a set-up dict (``{}``: bare). Unknown names raise
+    StudyError listing the valid ones."""
     try:
         builder = PRESETS[name]
     except KeyError:
@@ -176,18 +181,24 @@ def get_preset(name: str, *, quick: bool = False, seeds: int | None = None,
             f"unknown preset {name!r}; valid presets: {', '.join(preset_names())} "
             "(or a path to a SWEEP.toml)"
         ) from None
-    return builder(quick, seeds, setup)
+    if setup is None:
+        setup = REFERENCE
+    if isinstance(setup, str):
+        setup = named_setup(setup)
+    return builder(quick, seeds, setup or None)
 
 
 def resolve_study(target: str, *, quick: bool = False, seeds: int | None = None,
-                  setup: dict[str, Any] | None = None) -> Study:
+                  setup: dict[str, Any] | str | None = None) -> Study:
     """A preset name, or a path to a SWEEP.toml (anything ending in .toml or an existing file);
-    ``setup`` is laid over a preset's base case or a sweep's ``[base]``."""
-    if target in PRESETS:
-        return get_preset(target, quick=quick, seeds=seeds, setup=setup)
+    ``setup`` (a dict or a shipped name) is laid over a preset's base case or a sweep's
+    ``[base]``. ``None``: the target's default, the reference set-up for a preset and nothing
+    for a sweep (its ``[base]`` says what it wants)."""
     p = Path(target)
-    if target.endswith(".toml") or p.is_file():
-        return load_sweep_toml(p, seeds=seeds, quick=quick, setup=setup)
+    if target not in PRESETS and (target.endswith(".toml") or p.is_file()):
+        if isinstance(setup, str):
+            setup = named_setup(setup)
+        return load_sweep_toml(p, seeds=seeds, quick=quick, setup=setup or None)
     return get_preset(target, quick=quick, seeds=seeds, setup=setup)
 
 
@@ -213,13 +224,24 @@ def parse_setting(text: str) -> tuple[str, Any]:
     return path, value
 
 
-def setup_from(settings: list[str], file: str | Path | None = None) -> dict[str, Any] | None:
-    """A set-up dict from a TOML file (tables as in a case file) and ``PATH=VALUE`` settings
-    laid over it; None when both are empty."""
-    setup: dict[str, Any] = {}
+def setup_from(settings: list[str], file: str | Path | None = None, *,
+               preset: bool = False) -> dict[str, Any]:
+    """The set-up dict of the ``--setup`` and ``--set`` options: ``file`` is a shipped name
+    (``study-2022``, ``bare``) or a TOML file of case tables; without it a preset starts from
+    the reference set-up and a sweep from nothing. ``PATH=VALUE`` settings are laid over it.
+    ``{}`` is the bare engine defaults."""
     if file is not None:
-        setup = read_toml(Path(file), "--setup ")
+        name = str(file)
+        if is_setup_name(name):
+            setup = named_setup(name)
+        elif not Path(file).is_file():
+            raise StudyError(f"--setup {name}: no such file, nor a shipped set-up ("
+                             f"{', '.join(setup_names())})")
+        else:
+            setup = read_toml(Path(file), "--setup ")
+    else:
+        setup = named_setup(REFERENCE) if preset else {}
     for text in settings:
         path, value = parse_setting(text)
         set_path(setup, path, value)
-    return setup or None
+    return setup

@@ -26,6 +26,7 @@ from .derived import (
     theory,
 )
 from .figures import make_figures
+from .named_setups import describe_setup
 from .storage import collect, read_study
 
 __all__ = ["build_report", "write_report"]
@@ -57,6 +58,7 @@ def build_report(
         f"# Study report: {meta.get('name', study_dir.name)}",
         "",
         f"- kind: {meta.get('kind', '?')}{' (quick)' if meta.get('quick') else ''}",
+        f"- set-up: {describe_setup((meta.get('definition') or {}).get('setup'))}",
         f"- runs: {n_total} expected, {n_ok} ok, {n_failed} failed, "
         f"{max(n_total - n_ok - n_failed, 0)} pending",
         f"- analytical formulas from: {theory()['source']}",

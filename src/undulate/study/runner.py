@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
+from .named_setups import describe_setup
 from .spec import RunSpec, Study, StudyError
 from .storage import (
     RECORD_SCHEMA,
@@ -382,8 +383,9 @@ def _check_study_dir(out: Path, study: Study) -> None:
     now = study.definition.get("setup") or {}
     if before != now:
         raise StudyError(
-            f"{out} already holds study {study.name!r} on the set-up {before or 'of the defaults'}"
-            f"; use another --out for the set-up {now or 'of the defaults'}"
+            f"{out} already holds study {study.name!r} on the set-up {describe_setup(before)}; "
+            f"use another --out for the set-up {describe_setup(now)}, or resume that one with "
+            "the same --setup/--set (bare: the engine's defaults)"
         )
 
 
