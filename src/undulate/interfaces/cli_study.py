@@ -175,6 +175,74 @@ def sentinel_cmd(
     _out.print(str(out / "sentinel.md"), highlight=False, soft_wrap=True)
 
 
+@study_app.command("transitions")
+def transitions_cmd(
+    out: Annotated[Path, typer.Option("--out", "-o", help="study directory (resumable)")],
+    gaps: Annotated[
+        list[float] | None,
+        typer.Option("--s", help="gap between the five rods [mm] (repeat) \\[default: 0, 10, "
+                     "25, 50]"),
+    ] = None,
+    names: Annotated[
+        list[str] | None,
+        typer.Option("--transition", help="e.g. 3->1 (repeat) \\[default: 3->1, 5->3, 7->5]"),
+    ] = None,
+    tol: Annotated[float, typer.Option("--tol", help="half-width of the final bracket [mm]")]
+    = 0.01,
+    known: Annotated[
+        Path | None,
+        typer.Option("--from", help="a phase-diagram table.csv on the same set-up: its runs "
+                     "count as simulated points (fewer runs)"),
+    ] = None,
+    settings: SetOption = None,
+    setup_file: SetupOption = None,
+    quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")]
+    = False,
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
+    ] = None,
+    runner: Annotated[
+        str | None,
+        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
+    ] = None,
+) -> None:
+    """Locate the transitions n+2 -> n of five parallel rods by bisection in h: h* at each gap
+    to +-TOL mm (OUT/table.csv, OUT/transitions.png), rounds of runs in parallel."""
+    import pandas as pd
+
+    from undulate.study import transitions as tr
+
+    try:
+        setup = setup_from(settings or [], setup_file, preset=True)
+        chosen = dict(tr.parse_transition(t) for t in names) if names else None
+        table = pd.read_csv(known) if known is not None else None
+    except StudyError as err:
+        _fail(str(err))
+    except (OSError, pd.errors.ParserError) as err:
+        _fail(f"--from {known}: {err}")
+
+    def run_round(study: Study) -> None:
+        summary = _run(study, out, runner=runner, workers=workers, dask=None,
+                       retry_failed=False, artifacts=False, batch=1)
+        del summary
+
+    try:
+        result = tr.find_transitions(out, run_round, s_values=gaps or tr.DEFAULT_S,
+                                     transitions=chosen, tol=tol, quick=quick,
+                                     setup=setup or None, known=table,
+                                     say=lambda t: _err.print(t, highlight=False))
+    except StudyError as err:
+        _fail(str(err))
+    result.to_csv(out / "table.csv", index=False)
+    tr.plot_transitions(result, out / "transitions.png")
+    _out.print(result.to_string(index=False), highlight=False, markup=False)
+    ratios = tr.bundling_ratios(result)
+    if not ratios.empty:
+        _out.print(ratios.to_string(index=False), highlight=False, markup=False)
+    _out.print(str(out / "table.csv"), highlight=False, soft_wrap=True)
+
+
 @study_app.command("setups")
 def setups_cmd(
     name: Annotated[str | None, typer.Argument(help="print this set-up's TOML (with why)")]
