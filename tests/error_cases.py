@@ -389,6 +389,15 @@ CASES: list[ErrorCase] = [
               ("x.svg: lines a and b: cross at (0, 0) mm",)),
     ErrorCase("gcode-none", "Print files (`undulate gcode`)", "neither a case nor `--pattern`",
               lambda d: ["gcode", "--out", "x.gcode"], ("give a case file (CONFIG) or --pattern",)),
+    # ---- export -------------------------------------------------------------------------
+    ErrorCase("export-missing", "3D models (`undulate export`)", "a RUN_DIR that does not exist",
+              lambda d: ["export", "nowhere", "--out", "m.glb"], ("RUN_DIR: nowhere is not a folder",)),
+    ErrorCase("export-not-run", "3D models (`undulate export`)", "a folder that is not a run",
+              lambda d: (d / "notes").mkdir() or ["export", "notes", "--out", "m.glb"],
+              ("has no final.vtu, centerlines.npz, metrics.json",)),
+    ErrorCase("export-format", "3D models (`undulate export`)", "`--out model.ply`",
+              lambda d: (d / "r").mkdir() or ["export", "r", "--out", "model.ply"],
+              ("format: must be one of glb, obj, stl",)),
     # ---- serve --------------------------------------------------------------------------
     ErrorCase("serve-port", "Web page (`undulate serve`)", "`--port 0`",
               lambda d: ["serve", "--port", "0"], ("--port: must be in 1..65535",)),

@@ -300,13 +300,14 @@ def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monk
     import os
 
     from undulate.study import runner
+    from undulate.study.spec import coarse_first
 
     monkeypatch.setattr(runner, "RUNS_PER_WORKER", 2)
     study = _small_study([0.2, 0.3, 0.4, 0.6, 0.7])
     run_study(study, tmp_path / "a", run_fn="_study_fakes:pid_run", workers=1,
               progress=False, artifacts=False)
-    recs = sorted(_records(tmp_path / "a").values(), key=lambda r: r["params"]["rods.h"])
-    pids = [r["record"]["pid"] for r in recs]
+    recs = _records(tmp_path / "a")
+    pids = [recs[r.id]["record"]["pid"] for r in coarse_first(study.runs)]  # the run order
     assert os.getpid() not in pids
     assert len(set(pids)) == 3  # 2 + 2 + 1 runs
     assert pids[0] == pids[1] != pids[2] == pids[3] != pids[4]

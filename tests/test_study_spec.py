@@ -125,3 +125,31 @@ def test_seed_conflict_and_set_path() -> None:
     d: dict = {"a": 1}
     with pytest.raises(StudyError):
         set_path(d, "a.b", 2)
+
+
+def test_coarse_first_covers_the_grid_before_filling_it() -> None:
+    from undulate.study.spec import coarse_first
+
+    study = build_study("grid", {"rods": {"L": 100.0}},
+                        {"rods.h": [0.1 * (i + 1) for i in range(9)],
+                         "rods.s": [2.5 * j for j in range(5)]},
+                        kind="sweep", single_rod_rule=False, validate=False)
+    order = coarse_first(study.runs)
+    assert sorted(r.id for r in order) == sorted(r.id for r in study.runs)
+
+    def idx(r):
+        return (round(r.params["rods.h"] / 0.1) - 1, round(r.params["rods.s"] / 2.5))
+
+    pos = [idx(r) for r in order]
+    # the first values first, then every 4th, every 2nd, then the rest: each level is a
+    # whole coarser grid
+    assert pos[0] == (0, 0) and pos[1] == (8, 0)  # index 8 divides by 2 three times
+    assert set(pos[:6]) == {(i, j) for i in (0, 4, 8) for j in (0, 4)}
+    n4 = sum(1 for i, j in pos if i % 4 == 0 and j % 4 == 0)
+    assert all(i % 4 == 0 and j % 4 == 0 for i, j in pos[:n4])
+    n2 = sum(1 for i, j in pos if i % 2 == 0 and j % 2 == 0)
+    assert all(i % 2 == 0 and j % 2 == 0 for i, j in pos[:n2])
+    # within a level the listed order is kept
+    rest = pos[n2:]
+    listed = [idx(r) for r in study.runs if idx(r) in set(rest)]
+    assert rest == listed

@@ -1,4 +1,5 @@
-"""``undulate gcode``: print files for a case's lines (docs/fabrication.md)."""
+"""``undulate gcode`` and ``undulate export``: print files for a case's lines, 3D models of a
+finished run (docs/fabrication.md, docs/design.md)."""
 
 from __future__ import annotations
 
@@ -127,6 +128,31 @@ def gcode(
                + (f"; drawings {', '.join(map(str, drawn))}" if drawn else ""))
 
 
+def export(
+    run_dir: Annotated[Path, typer.Argument(help="a finished run folder (the --out of "
+                                            "'undulate run' or 'undulate demo')")],
+    out: Annotated[Path, typer.Option("--out", help="file to write (.glb, .obj or .stl)")],
+    fmt: Annotated[str | None, typer.Option(
+        "--format", help="glb, obj or stl [default: from --out's suffix]")] = None,
+) -> None:
+    """3D model of a run's final state for design tools: the deformed fabric surface and each
+    rod as a b x h solid along its centre line, in mm, one named part each.
+
+    glb (binary glTF: Blender, three.js, model-viewer), obj (Rhino, Blender), stl (one named,
+    watertight solid per rod; the fabric as a surface). Example:
+    undulate export undulate-demo --out demo.glb
+    """
+    from ..fabrication.model3d import ExportError, export_run
+    from .cli import _fail
+
+    try:
+        path = export_run(run_dir, out, fmt)
+    except ExportError as err:
+        raise _fail(str(err)) from None
+    typer.echo(f"wrote {path} ({path.stat().st_size / 1024:.0f} kB, units mm)")
+
+
 def register(app: typer.Typer) -> None:
-    """Add the ``gcode`` command to ``app``."""
+    """Add the ``gcode`` and ``export`` commands to ``app``."""
     app.command("gcode")(gcode)
+    app.command("export")(export)

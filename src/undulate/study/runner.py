@@ -32,7 +32,7 @@ from typing import Any
 
 from .. import __version__
 from .named_setups import describe_setup
-from .spec import RunSpec, Study, StudyError
+from .spec import RunSpec, Study, StudyError, coarse_first
 from .storage import (
     RECORD_SCHEMA,
     jsonable,
@@ -443,7 +443,7 @@ def run_study(
     summary = RunSummary(total=len(study.runs), invalid_files=[str(p) for p in scan.invalid])
     todo: list[RunSpec] = []
     attempts: dict[str, int] = {}
-    for r in study.runs:
+    for r in coarse_first(study.runs):
         prev = scan.records.get(r.id)
         if prev is None:
             todo.append(r)

@@ -31,6 +31,7 @@ __all__ = [
     "expand_values",
     "apply_single_rod_rule",
     "build_study",
+    "coarse_first",
     "load_sweep_toml",
     "merge_case",
 ]
@@ -183,6 +184,34 @@ def apply_single_rod_rule(case: dict[str, Any]) -> dict[str, Any]:
 
 def _short(v: Any) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def coarse_first(runs: list[RunSpec]) -> list[RunSpec]:
+    """The runs reordered so that every prefix covers the swept grid as evenly as it can.
+
+    Along each swept axis a value's index i has the level "how often 2 divides i" (the first
+    value the highest); a run's level is the lowest of its axes' levels. Runs are taken by
+    level, highest first, in their listed order within a level: first every 16th value of
+    each axis, then every 8th, 4th, 2nd, then the rest. An interrupted sweep therefore leaves
+    a coarse picture of the whole plane instead of a finished strip of it. Runs without
+    parameters keep their order.
+    """
+    axes: dict[str, dict[str, int]] = {}
+    for r in runs:
+        for p, v in r.params.items():
+            index = axes.setdefault(p, {})
+            index.setdefault(canonical_json(v), len(index))
+
+    def level(r: RunSpec) -> int:
+        levels = [_two_adic(axes[p][canonical_json(v)]) for p, v in r.params.items()]
+        return min(levels, default=0)
+
+    return sorted(runs, key=lambda r: -level(r))
+
+
+def _two_adic(i: int) -> int:
+    """How many times 2 divides i (a large number for 0, the first value of an axis)."""
+    return 64 if i == 0 else (i & -i).bit_length() - 1
 
 
 def build_study(
