@@ -391,7 +391,8 @@ CASES: list[ErrorCase] = [
               lambda d: ["gcode", "--out", "x.gcode"], ("give a case file (CONFIG) or --pattern",)),
     # ---- export -------------------------------------------------------------------------
     ErrorCase("export-missing", "3D models (`undulate export`)", "a RUN_DIR that does not exist",
-              lambda d: ["export", "nowhere", "--out", "m.glb"], ("RUN_DIR: nowhere is not a folder",)),
+              lambda d: ["export", "nowhere", "--out", "m.glb"],
+              ("RUN_DIR: nowhere is not a folder",)),
     ErrorCase("export-not-run", "3D models (`undulate export`)", "a folder that is not a run",
               lambda d: (d / "notes").mkdir() or ["export", "notes", "--out", "m.glb"],
               ("has no final.vtu, centerlines.npz, metrics.json",)),
