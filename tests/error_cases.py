@@ -374,7 +374,15 @@ CASES: list[ErrorCase] = [
               ("fabric.size: give either size or margin_y",)),
     # ---- gcode --------------------------------------------------------------------------
     ErrorCase("gcode-bed", "Print files (`undulate gcode`)", "a bed too small for the lines",
-              lambda d: _gcode_args(d, "--bed-x", "15"), ("outside the 15 x 220 mm bed",)),
+              lambda d: _gcode_args(d, "--bed", "15x220", "--overhang"),
+              ("the print (x", "mm past the left (X 0) edge", "of the 15 x 220 mm bed")),
+    ErrorCase("gcode-bed-size", "Print files (`undulate gcode`)", "`--bed 220`",
+              lambda d: _gcode_args(d, "--bed", "220"), ("--bed: must be WIDTHxDEPTH",)),
+    ErrorCase("gcode-fabric", "Print files (`undulate gcode`)",
+              "a stretched fabric larger than the bed",
+              lambda d: (d / "wide.toml").write_text('[rods]\nL = 20.0\n')
+              and ["gcode", "wide.toml", "--out", "w.gcode"],
+              ("the stretched fabric", "mm past the front (Y 0) edge", "--overhang")),
     ErrorCase("gcode-nozzle", "Print files (`undulate gcode`)", "`--nozzle -1`",
               lambda d: _gcode_args(d, "--nozzle", "-1"), ("nozzle: must be a number > 0",)),
     ErrorCase("gcode-width", "Print files (`undulate gcode`)", "rods narrower than the nozzle",

@@ -24,7 +24,7 @@ def parse(text: str) -> list[dict]:
     moves = []
     for raw in text.splitlines():
         code = raw.split(";", 1)[0].strip()
-        if not code.startswith(("G0", "G1")):
+        if not re.match(r"G[01](\s|$)", code):  # G0/G1, not G10 (RepRapFirmware's tools)
             assert not code.startswith(("G91", "M83")), raw  # absolute only
             continue
         w = {k: float(v) for k, v in WORD.findall(code)}
@@ -44,6 +44,9 @@ CASE = {"rods": {"h": 0.3, "N": 5, "s": 5.0, "L": 60.0}, "release": {"eps0": 0.5
 
 
 def _gcode(case_dict=CASE, **kw):
+    # the simulated sheet (200 mm of fabric beside the rods) is wider than the 220 mm bed:
+    # its frame holds it beyond the bed's edges
+    kw.setdefault("overhang", True)
     case = case_from_dict(case_dict)
     lines = lines_of_case(case)
     text, plan = make_gcode(lines, PrintSettings(**kw), eps0=case.release.eps0,
@@ -114,7 +117,7 @@ def test_bad_prints_raise_one_clear_error():
     thin = PrintLine(0, np.array([[0.0, 0.0], [10.0, 0.0]]), 0.02, 1.0)
     with pytest.raises(GcodeError, match="thinner than the thinnest layer"):
         make_gcode([thin], eps0=0.5, fabric_t=0.4)
-    with pytest.raises(GcodeError, match="outside the 50 x 50 mm bed"):
+    with pytest.raises(GcodeError, match=r"the print .* of the 50 x 50 mm bed"):
         _gcode(bed_x=50.0, bed_y=50.0)
     with pytest.raises(GcodeError, match="nozzle: must be a number > 0"):
         _gcode(nozzle=-1.0)
@@ -124,11 +127,57 @@ def test_cli_writes_gcode_and_preview(tmp_path: Path):
     case = tmp_path / "five.toml"
     case.write_text('[rods]\nh = 0.4\nN = 5\ns = 10.0\nL = 60.0\n')
     out, png = tmp_path / "five.gcode", tmp_path / "five.png"
-    res = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--preview", str(png)])
+    res = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--preview", str(png),
+                                   "--overhang"])
     assert res.exit_code == 0, res.output
     assert parse(out.read_text()) and png.stat().st_size > 5000
-    bad = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--bed-x", "30"])
+    assert "Warning: the stretched fabric" in res.stderr
+    bad = CliRunner().invoke(app, ["gcode", str(case), "--out", str(out), "--bed", "30x220",
+                                   "--overhang"])
     assert bad.exit_code == 2 and "bed" in bad.stderr and "Traceback" not in bad.stderr
+    # the preview goes beside the G-code unless told otherwise
+    small = tmp_path / "small.toml"
+    small.write_text('[rods]\nh = 0.4\nL = 60.0\n[fabric]\nmargin_y = 30.0\n')
+    res = CliRunner().invoke(app, ["gcode", str(small), "--out", str(tmp_path / "s.gcode")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "s.png").stat().st_size > 5000
+    res = CliRunner().invoke(app, ["gcode", str(small), "--out", str(tmp_path / "t.gcode"),
+                                   "--no-preview"])
+    assert res.exit_code == 0 and not (tmp_path / "t.png").exists()
+
+
+def test_fabric_off_the_bed_says_how_far_unless_the_frame_overhangs():
+    # five rods on the default sheet: 200 mm of fabric beside the outer rods
+    case = case_from_dict(CASE)
+    x0, x1, y0, y1 = case.fabric_extent()
+    with pytest.raises(GcodeError) as err:
+        _gcode(overhang=False)
+    msg = str(err.value)
+    assert f"{-(y0 + 110.0):.1f} mm past the front (Y 0) edge" in msg
+    assert f"{y1 + 110.0 - 220.0:.1f} mm past the back (Y 220) edge" in msg
+    assert "--overhang" in msg and "past the left" not in msg
+    _, _, text, plan = _gcode(overhang=True)
+    assert len(plan.warnings) == 1 and "; WARNING: the stretched fabric" in text
+    # a bed that holds the whole fabric: no warning
+    _, _, _, plan = _gcode(overhang=False, bed_x=x1 - x0 + 2, bed_y=y1 - y0 + 2)
+    assert plan.warnings == []
+    # lines off the bed stay an error with overhang
+    with pytest.raises(GcodeError, match=r"the print .* reaches .* mm past the left"):
+        _gcode(origin=(10.0, 110.0))
+
+
+@pytest.mark.parametrize(("flavour", "start", "end"), [
+    ("marlin", "M109 S210", "M104 S0"),
+    ("klipper", "M109 S210", "TURN_OFF_HEATERS"),
+    ("reprap", "G10 P0 S210 R210", "G10 P0 S0 R0"),
+])
+def test_flavours_change_only_the_start_and_end_blocks(flavour, start, end):
+    _, _, text, _ = _gcode(flavour=flavour)
+    _, _, marlin, _ = _gcode()
+    assert start in text and end in text and f"firmware flavour: {flavour}" in text
+    assert parse(text) == parse(marlin)
+    with pytest.raises(GcodeError, match="flavour: must be one of marlin, klipper, reprap"):
+        _gcode(flavour="prusa")
 
 
 def test_drawings_in_the_print_and_relaxed_frames(tmp_path: Path):

@@ -4,7 +4,16 @@
 on the fabric clamped stretched on the bed.
 """
 
-from .gcode import GcodeError, PrintLine, PrintSettings, lines_of_case, make_gcode, preview_png
+from .gcode import (
+    FLAVOURS,
+    GcodeError,
+    PrintLine,
+    PrintSettings,
+    lines_of_case,
+    make_gcode,
+    parse_bed,
+    preview_png,
+)
 
-__all__ = ["GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
-           "preview_png"]
+__all__ = ["FLAVOURS", "GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
+           "parse_bed", "preview_png"]

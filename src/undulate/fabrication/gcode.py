@@ -14,6 +14,13 @@ Travel moves never cross a printed line in plan view: a move goes straight to th
 when that keeps more than b/2 from every other line, otherwise around the group of lines
 (out along x beyond every line by ``clearance``, along y, back in). A move that finds no such
 route is an error, not a G-code.
+
+Everything printed must lie on the bed, and so must the stretched fabric it is printed on
+(its frame clamps it flat on the bed): either off the bed is an error that says by how many mm
+and past which edge. Where the frame holds the fabric beyond the bed's edges, ``overhang``
+lets the fabric (never a line) reach past them, with a warning in the header and in
+:attr:`Plan.warnings`. The start and end blocks follow the firmware's ``flavour``
+(:data:`FLAVOURS`); the moves are the same G0/G1 for all.
 """
 
 from __future__ import annotations
@@ -27,7 +34,8 @@ import numpy as np
 
 from ..model.config import number_problem
 
-__all__ = ["GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
+__all__ = ["FLAVOURS", "GcodeError", "PrintLine", "PrintSettings", "lines_of_case", "make_gcode",
+           "off_bed", "parse_bed",
            "preview_png", "Move"]
 
 
@@ -77,9 +85,14 @@ class PrintSettings:
     clearance: float = 3.0
     nozzle_temp: float = 210.0
     bed_temp: float = 60.0
+    flavour: str = "marlin"
+    overhang: bool = False
 
     def check(self) -> None:
         """Raise GcodeError naming the first invalid option."""
+        if self.flavour not in FLAVOURS:
+            raise GcodeError(f"flavour: must be one of {', '.join(FLAVOURS)} (got "
+                             f"{self.flavour!r})")
         positive = ("bed_x", "bed_y", "nozzle", "filament", "layer_max", "layer_min",
                     "width_min", "width_max", "print_speed", "travel_speed", "clearance")
         for k in positive:
@@ -123,6 +136,70 @@ class Plan:
     layer_height: float
     passes: dict[int, int]
     moves: list[Move] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def _start_marlin(st: PrintSettings) -> list[str]:
+    return [f"M140 S{st.bed_temp:g}", f"M104 S{st.nozzle_temp:g}", f"M190 S{st.bed_temp:g}",
+            f"M109 S{st.nozzle_temp:g}", "G28 ; home", "G92 E0"]
+
+
+def _end_marlin(st: PrintSettings) -> list[str]:
+    return ["M104 S0", "M140 S0", "M84 ; motors off"]
+
+
+def _start_klipper(st: PrintSettings) -> list[str]:
+    # Klipper runs the same M-codes; its own commands where they say more
+    return [f"M140 S{st.bed_temp:g}", f"M104 S{st.nozzle_temp:g}", f"M190 S{st.bed_temp:g}",
+            f"M109 S{st.nozzle_temp:g}", "G28 ; home", "G92 E0"]
+
+
+def _end_klipper(st: PrintSettings) -> list[str]:
+    return ["TURN_OFF_HEATERS", "M84 ; motors off"]
+
+
+def _start_reprap(st: PrintSettings) -> list[str]:
+    # RepRapFirmware: tool temperatures with G10, select the tool, wait with M116
+    return [f"M140 S{st.bed_temp:g}", f"G10 P0 S{st.nozzle_temp:g} R{st.nozzle_temp:g}",
+            "T0", "M116 ; wait for the temperatures", "G28 ; home", "G92 E0"]
+
+
+def _end_reprap(st: PrintSettings) -> list[str]:
+    return ["G10 P0 S0 R0", "M140 S0", "M84 ; motors off"]
+
+
+#: firmware flavour -> (start block, end block) of the G-code
+FLAVOURS: dict[str, tuple[Any, Any]] = {
+    "marlin": (_start_marlin, _end_marlin),
+    "klipper": (_start_klipper, _end_klipper),
+    "reprap": (_start_reprap, _end_reprap),
+}
+
+
+def parse_bed(text: str) -> tuple[float, float]:
+    """``"220x220"`` (WIDTHxDEPTH in mm; ``X`` or spaces also) -> (220.0, 220.0)."""
+    parts = text.lower().replace(" ", "").split("x")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        size = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise GcodeError(f"--bed: must be WIDTHxDEPTH in mm, e.g. 220x220 (got {text!r})"
+                         ) from None
+    if not all(math.isfinite(v) and 0 < v <= 2000 for v in size):
+        raise GcodeError(f"--bed: width and depth must be > 0 and <= 2000 mm (got {text!r})")
+    return size
+
+
+def off_bed(x0: float, x1: float, y0: float, y1: float, bed_x: float, bed_y: float
+            ) -> list[str]:
+    """How far a box (bed coordinates) reaches past each edge of the bed, as phrases."""
+    out = []
+    for past, edge, at in ((-x0, "left (X 0)", x0), (x1 - bed_x, f"right (X {bed_x:g})", x1),
+                           (-y0, "front (Y 0)", y0), (y1 - bed_y, f"back (Y {bed_y:g})", y1)):
+        if past > 1e-9:
+            out.append(f"{past:.1f} mm past the {edge} edge (at {at:.1f})")
+    return out
 
 
 def lines_of_case(case: Any) -> list[PrintLine]:
@@ -259,10 +336,18 @@ def make_gcode(lines: list[PrintLine], settings: PrintSettings | None = None, *,
     w(f"; CLAMP THE FABRIC STRETCHED along X by eps0 = {eps0:g}: {1 + eps0:g} x its relaxed "
       "length, long edges free; the lines are placed in that stretched frame")
     if fabric_extent is not None:
-        x0, x1, y0, y1 = fabric_extent
-        w(f"; stretched fabric: x {x0 + origin[0]:.2f} .. {x1 + origin[0]:.2f}, "
-          f"y {y0 + origin[1]:.2f} .. {y1 + origin[1]:.2f} mm on the bed (centre at X "
-          f"{origin[0]:g} Y {origin[1]:g})")
+        x0, x1, y0, y1 = (fabric_extent[0] + origin[0], fabric_extent[1] + origin[0],
+                          fabric_extent[2] + origin[1], fabric_extent[3] + origin[1])
+        w(f"; stretched fabric: x {x0:.2f} .. {x1:.2f}, y {y0:.2f} .. {y1:.2f} mm on the bed "
+          f"(centre at X {origin[0]:g} Y {origin[1]:g})")
+        if past := off_bed(x0, x1, y0, y1, st.bed_x, st.bed_y):
+            msg = (f"the stretched fabric (x {x0:.1f} .. {x1:.1f}, y {y0:.1f} .. {y1:.1f} mm) "
+                   f"reaches {' and '.join(past)} of the {st.bed_x:g} x {st.bed_y:g} mm bed")
+            if not st.overhang:
+                raise GcodeError(f"bed: {msg} (use a larger --bed, a smaller fabric in the "
+                                 "case, or --overhang if its frame holds it beyond the bed)")
+            plan.warnings.append(msg)
+            w(f"; WARNING: {msg}; its frame must hold it flat beyond the bed's edges")
     w(f"; {n_lines} line(s): h = {lines[0].h:g} mm as {n_layers} layer(s) of {zl:.4g} mm, "
       f"first layer {zl:.4g} mm above the fabric top at Z {z_fab:g}")
     for ln in lines:
@@ -273,12 +358,9 @@ def make_gcode(lines: list[PrintLine], settings: PrintSettings | None = None, *,
     w("G21 ; millimetres")
     w("G90 ; absolute positions")
     w("M82 ; absolute extrusion")
-    w(f"M140 S{st.bed_temp:g}")
-    w(f"M104 S{st.nozzle_temp:g}")
-    w(f"M190 S{st.bed_temp:g}")
-    w(f"M109 S{st.nozzle_temp:g}")
-    w("G28 ; home")
-    w("G92 E0")
+    start, end = FLAVOURS[st.flavour]
+    w(f"; firmware flavour: {st.flavour}")
+    out.extend(start(st))
     f_print = st.print_speed * 60.0
     f_travel = st.travel_speed * 60.0
     e = 0.0
@@ -345,16 +427,14 @@ def make_gcode(lines: list[PrintLine], settings: PrintSettings | None = None, *,
                 pos = path[-1]
                 cur_line = ln.index
     w(f"G0 Z{z_safe + 10:.3f} F{f_travel:.0f}")
-    w("M104 S0")
-    w("M140 S0")
-    w("M84 ; motors off")
+    out.extend(end(st))
     xs = [c for m in plan.moves for c in (m.x0, m.x1)]
     ys = [c for m in plan.moves for c in (m.y0, m.y1)]
-    if min(xs) < 0 or max(xs) > st.bed_x or min(ys) < 0 or max(ys) > st.bed_y:
-        raise GcodeError(f"bed: the print spans x {min(xs):.1f} .. {max(xs):.1f}, y "
-                         f"{min(ys):.1f} .. {max(ys):.1f} mm, outside the {st.bed_x:g} x "
-                         f"{st.bed_y:g} mm bed (move the print with --origin-x/--origin-y or "
-                         "use a larger bed)")
+    if past := off_bed(min(xs), max(xs), min(ys), max(ys), st.bed_x, st.bed_y):
+        raise GcodeError(f"bed: the print (x {min(xs):.1f} .. {max(xs):.1f}, y {min(ys):.1f} "
+                         f".. {max(ys):.1f} mm) reaches {' and '.join(past)} of the "
+                         f"{st.bed_x:g} x {st.bed_y:g} mm bed (move it with "
+                         "--origin-x/--origin-y or use a larger --bed)")
     return "\n".join(out) + "\n", plan
 
 

@@ -26,12 +26,22 @@ def gcode(
     t: Annotated[float, typer.Option("--t", help="with --pattern: fabric thickness, mm")]
     = 0.4,
     preview: Annotated[Path | None, typer.Option(
-        "--preview", help="also write a PNG top view of the toolpaths")] = None,
+        "--preview", help="PNG top view of the toolpaths [default: beside --out, .png]")]
+    = None,
+    no_preview: Annotated[bool, typer.Option("--no-preview", help="write no preview PNG")]
+    = False,
     drawing: Annotated[Path | None, typer.Option(
         "--drawing", help="also draw the lines (.svg or .dxf): this file in the print frame, "
         "NAME-relaxed.EXT in the relaxed fabric's frame")] = None,
-    bed_x: Annotated[float, typer.Option("--bed-x", help="bed size along X, mm")] = 220.0,
-    bed_y: Annotated[float, typer.Option("--bed-y", help="bed size along Y, mm")] = 220.0,
+    bed: Annotated[str, typer.Option(
+        "--bed", help="bed size WIDTHxDEPTH along X and Y, mm")] = "220x220",
+    flavour: Annotated[str, typer.Option(
+        "--flavour", help="firmware of the start and end blocks: marlin, klipper or reprap")]
+    = "marlin",
+    overhang: Annotated[bool, typer.Option(
+        "--overhang", help="the frame holds the stretched fabric beyond the bed's edges: "
+        "a fabric larger than the bed is a warning, not an error (lines must still be on "
+        "the bed)")] = False,
     origin_x: Annotated[float | None, typer.Option(
         "--origin-x", help="bed X of the fabric centre, mm (default: bed centre)")] = None,
     origin_y: Annotated[float | None, typer.Option("--origin-y", help="bed Y of it, mm")]
@@ -51,10 +61,17 @@ def gcode(
 
     Layers and passes give the rods' thickness h and width b; travel moves keep clear of
     printed lines; the header says how far to stretch the fabric. Examples:
-    undulate gcode examples/single_rod.toml --out rod.gcode --preview rod.png;
-    undulate gcode --pattern lines.svg --h 0.4 --out lines.gcode
+    undulate gcode examples/single_rod.toml --out rod.gcode (and rod.png);
+    undulate gcode --pattern lines.svg --h 0.4 --out lines.gcode --bed 300x300 --flavour klipper
     """
-    from ..fabrication import GcodeError, PrintSettings, lines_of_case, make_gcode, preview_png
+    from ..fabrication import (
+        GcodeError,
+        PrintSettings,
+        lines_of_case,
+        make_gcode,
+        parse_bed,
+        preview_png,
+    )
     from ..fabrication.drawing import write_drawing
     from ..model import ConfigError, Fabric, Release, Rods, load_case
     from ..model.config import check_value
@@ -97,7 +114,12 @@ def gcode(
         lam_y, direction = None, 0.0
     if (origin_x is None) != (origin_y is None):
         raise _fail("--origin-x, --origin-y: give both or neither")
+    try:
+        bed_x, bed_y = parse_bed(bed)
+    except GcodeError as err:
+        raise _fail(str(err)) from None
     st = PrintSettings(bed_x=bed_x, bed_y=bed_y, nozzle=nozzle, filament=filament,
+                       flavour=flavour, overhang=overhang,
                        origin=None if origin_x is None else (origin_x, origin_y),
                        fabric_z=fabric_z, print_speed=print_speed, travel_speed=travel_speed,
                        nozzle_temp=nozzle_temp, bed_temp=bed_temp)
@@ -109,6 +131,8 @@ def gcode(
     if drawing is not None and drawing.suffix.lower() not in (".svg", ".dxf"):
         raise _fail(f"--drawing {drawing}: must end in .svg or .dxf")
     drawn: list[Path] = []
+    if preview is None and not no_preview:
+        preview = out.with_suffix(".png") if out.suffix.lower() != ".png" else None
     try:
         out.write_text(text)
         if preview is not None:
@@ -118,6 +142,8 @@ def gcode(
                                   direction=direction)
     except OSError as err:
         raise _fail(f"cannot write {err.filename or out} ({err.strerror or err})") from None
+    for msg in plan.warnings:
+        typer.echo(f"Warning: {msg}", err=True)
     n_print = sum(m.kind == "print" for m in plan.moves)
     typer.echo(f"wrote {out}: {len(lines)} line(s), {plan.layers} layer(s) of "
                f"{plan.layer_height:.4g} mm, {n_print} printed moves; stretch the fabric by "
