@@ -2,8 +2,9 @@
 
 It is the worker body of :class:`undulate.interfaces.web.jobs.JobManager` (the job folder as
 a string), so the queue, progress, cancel and downloads are tested without the engine. It
-writes ``metrics.json`` and a small ``final.vtu`` laid out as the real output's (fabric
-triangles first, then each rod's centre line as its own run of points joined by line cells):
+writes ``metrics.json``, ``centerlines.npz`` and a small ``final.vtu`` laid out as the real
+output's (fabric triangles first, then each rod's centre line as its own run of points joined
+by line cells, ``is_rod`` telling them apart):
 each rod a sine of 3 half-waves, 2 mm high, 0.5 mm above a flat fabric grid that reaches
 :data:`FABRIC_MARGIN` mm beyond the rods.
 """
@@ -56,8 +57,11 @@ def write_fake_vtu(path: Path, case: dict) -> None:
         lines.append(np.column_stack([np.arange(off, off + len(r) - 1),
                                       np.arange(off + 1, off + len(r))]))
         off += len(r)
+    is_rod = np.r_[np.zeros(X.size), np.ones(off - X.size)]
     meshio.write(str(path), meshio.Mesh(np.vstack(pts), [("triangle", tris),
-                                                         ("line", np.concatenate(lines))]))
+                                                         ("line", np.concatenate(lines))],
+                                        point_data={"is_rod": is_rod}))
+    np.savez(path.parent / "centerlines.npz", **{f"rod{k}": r for k, r in enumerate(rods)})
 
 
 def fake_job(folder: str) -> None:
@@ -73,7 +77,8 @@ def fake_job(folder: str) -> None:
         _write_state(f, st)
     res = f / "result"
     res.mkdir()
-    (res / "metrics.json").write_text(json.dumps({"n": 3, "rods": len(case["pattern"]["lines"])}))
+    rods = [{"index": k, "h": 0.3, "b": 1.0, "n": 3} for k in range(len(case["pattern"]["lines"]))]
+    (res / "metrics.json").write_text(json.dumps({"n": 3, "rods": rods}))
     write_fake_vtu(res / "final.vtu", case)
     st.update(status="done", finished=time.time(), metrics={"n": 3, "family": "waves"})
     _write_state(f, st)

@@ -156,9 +156,10 @@ def test_jobs_run_concurrently_queue_and_download(client: TestClient) -> None:
     done = [_wait(client, j, ("done", "failed")) for j in ids]
     assert all(s["status"] == "done" for s in done), done
     st = done[0]
-    assert st["files"] == ["final.vtu", "metrics.json"] and st["metrics"]["n"] == 3
+    assert st["files"] == ["centerlines.npz", "final.vtu", "metrics.json"]
+    assert st["metrics"]["n"] == 3
     f = client.get(f"/api/jobs/{ids[0]}/files/metrics.json")
-    assert f.status_code == 200 and f.json()["rods"] == 5
+    assert f.status_code == 200 and len(f.json()["rods"]) == 5
     assert client.get(f"/api/jobs/{ids[0]}/files/..%2Fcase.json").status_code == 404
     assert {j["id"] for j in client.get("/api/jobs").json()} == set(ids)
 
@@ -326,3 +327,29 @@ def test_shape_of_a_finished_job(client: TestClient) -> None:
     assert pts[:, 1].min() >= -36.0 - 1e-9 and pts[:, 1].max() <= 36.0 + 1e-9
     assert pts[:, 0].max() - pts[:, 0].min() > 60.0  # but more than the rods themselves
     assert FABRIC_MARGIN > 30.0
+
+
+@pytest.mark.parametrize("fmt", ["glb", "obj", "stl"])
+def test_model_of_a_finished_job(client: TestClient, other: TestClient, fmt: str,
+                                 tmp_path: Path) -> None:
+    import trimesh
+
+    lines = [{"points": [[-30.0, 6.0], [30.0, 6.0]]}, {"points": [[-20.0, -6.0], [40.0, -6.0]]}]
+    jid = client.post("/api/jobs", json={"lines": lines, "seed": 1}).json()["id"]
+    early = client.get(f"/api/jobs/{jid}/model.{fmt}")
+    assert early.status_code == 404 and "no file 'final.vtu'" in early.json()["error"]
+    _wait(client, jid, ("done",))
+    r = client.get(f"/api/jobs/{jid}/model.{fmt}")
+    assert r.status_code == 200, r.text
+    assert f'filename="undulate-{jid}.{fmt}"' in r.headers["content-disposition"]
+    path = tmp_path / f"m.{fmt}"
+    path.write_bytes(r.content)
+    kw = {"split_objects": True, "group_material": False} if fmt == "obj" else {}
+    scene = trimesh.load(path, force="scene", **kw)
+    assert set(scene.geometry) == {"fabric", "rod_0", "rod_1"}
+    want = fake_rods({"pattern": {"lines": lines}})
+    for k, w in enumerate(want):
+        lo, hi = scene.geometry[f"rod_{k}"].bounds
+        assert np.all(lo <= w.min(0) + 1e-3) and np.all(hi >= w.max(0) - 1e-3)
+    assert other.get(f"/api/jobs/{jid}/model.{fmt}").status_code == 404  # not its job
+    assert client.get(f"/api/jobs/{jid}/model.ply").status_code in (404, 422)

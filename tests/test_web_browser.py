@@ -200,6 +200,29 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         assert len(pls) == 1
         xs = [float(p.split(",")[0]) for p in pls[0].get("points").split()]
         assert max(xs) - min(xs) == pytest.approx(40.0 / 1.5, abs=1e-3)
+        # the same lines as DXF (ezdxf reads it back: one centre line L / (1 + eps0) long)
+        with page.expect_download() as dl:
+            page.click("#dxf-relaxed")
+        assert dl.value.suggested_filename == "lines-relaxed.dxf"
+        dxf = tmp_path / "lines-relaxed.dxf"
+        dl.value.save_as(dxf)
+        import ezdxf
+
+        ents = [e for e in ezdxf.readfile(dxf).modelspace() if e.dxf.layer == "LINES"]
+        assert len(ents) == 1
+        pts = [p[:2] for p in ents[0].get_points()]
+        assert max(p[0] for p in pts) - min(p[0] for p in pts) == pytest.approx(40 / 1.5,
+                                                                                abs=1e-3)
+        # the final state as a 3D model: a .glb that trimesh loads, the rod a closed solid
+        with page.expect_download() as dl:
+            page.click("#model-glb")
+        glb = tmp_path / "model.glb"
+        dl.value.save_as(glb)
+        import trimesh
+
+        scene = trimesh.load(glb, force="scene")
+        assert set(scene.geometry) == {"fabric", "rod_0"}
+        assert scene.geometry["rod_0"].is_volume
         with page.expect_download() as dl:
             page.click("#gcode")
         g = tmp_path / "lines.gcode"

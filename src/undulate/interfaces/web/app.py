@@ -368,12 +368,30 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
     def job_file(jid: str, name: str, request: Request) -> FileResponse:
         return FileResponse(_done_file(jid, name, request), filename=name)
 
+    @app.get("/api/jobs/{jid}/model.{fmt}")
+    def job_model(jid: str, fmt: Literal["glb", "obj", "stl"], request: Request) -> Response:
+        """The job's final state as a 3D model (`undulate export`): glb, obj or stl, in mm."""
+        import tempfile
+
+        from ...fabrication.model3d import ExportError, export_run
+
+        run = _done_file(jid, "final.vtu", request).parent
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                data = export_run(run, Path(tmp) / f"model.{fmt}").read_bytes()
+            except ExportError as err:
+                raise HTTPException(404, f"job {jid}: {err}") from None
+        media = {"glb": "model/gltf-binary", "obj": "model/obj", "stl": "model/stl"}[fmt]
+        return Response(data, media_type=media, headers={
+            "Content-Disposition": f'attachment; filename="undulate-{jid}.{fmt}"'})
+
     @app.get("/api/jobs/{jid}/shape")
     def job_shape(jid: str, request: Request) -> dict[str, Any]:
         return final_shape(_done_file(jid, "final.vtu", request))
 
     @app.post("/api/drawing")
-    def drawing(p: Params, frame: Literal["print", "relaxed"] = "print") -> PlainTextResponse:
+    def drawing(p: Params, frame: Literal["print", "relaxed"] = "print",
+                fmt: Literal["svg", "dxf"] = "svg") -> Response:
         import tempfile
 
         import numpy as np
@@ -386,13 +404,14 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
                   for k, ln in enumerate(lines)]
         with tempfile.TemporaryDirectory() as tmp:
             try:
-                paths = write_drawing(plines, Path(tmp) / "lines.svg", eps0=p.eps0, nu=p.nu,
-                                      name="undulate")
+                paths = write_drawing(plines, Path(tmp) / f"lines.{fmt}", eps0=p.eps0,
+                                      nu=p.nu, name="undulate")
             except GcodeError as err:
                 raise PatternError(str(err)) from None
-            text = paths[0 if frame == "print" else 1].read_text()
-        return PlainTextResponse(text, media_type="image/svg+xml", headers={
-            "Content-Disposition": f'attachment; filename="lines-{frame}.svg"'})
+            data = paths[0 if frame == "print" else 1].read_bytes()
+        media = "image/svg+xml" if fmt == "svg" else "image/vnd.dxf"
+        return Response(data, media_type=media, headers={
+            "Content-Disposition": f'attachment; filename="lines-{frame}.{fmt}"'})
 
     @app.exception_handler(StarletteHTTPException)  # also the router's 404 and 405
     async def _http(_: Request, err: StarletteHTTPException) -> JSONResponse:

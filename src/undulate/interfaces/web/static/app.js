@@ -237,6 +237,19 @@ function showResults(id, st) {
   pics.innerHTML = "";
   const ul = $("files");
   ul.innerHTML = "";
+  // the final state as a 3D model for design tools (undulate export), then the run's files
+  const models = [["glb", "3D model (.glb: Blender, three.js)"], ["obj", "3D model (.obj: Rhino)"],
+    ["stl", "3D model (.stl)"]];
+  for (const [fmtName, label] of models) {
+    const li = document.createElement("li");
+    const a = document.createElement("a");
+    a.href = `/api/jobs/${id}/model.${fmtName}`;
+    a.textContent = label;
+    a.id = `model-${fmtName}`;
+    a.setAttribute("download", `undulate-${id}.${fmtName}`);
+    li.appendChild(a);
+    ul.appendChild(li);
+  }
   for (const f of st.files) {
     const url = `/api/jobs/${id}/files/${encodeURIComponent(f)}`;
     if (f === "rod_0_side.png") {
@@ -381,6 +394,10 @@ $("svg-print").addEventListener("click",
   () => download("/api/drawing?frame=print", "lines-print.svg", "SVG"));
 $("svg-relaxed").addEventListener("click",
   () => download("/api/drawing?frame=relaxed", "lines-relaxed.svg", "SVG"));
+$("dxf-print").addEventListener("click",
+  () => download("/api/drawing?frame=print&fmt=dxf", "lines-print.dxf", "DXF"));
+$("dxf-relaxed").addEventListener("click",
+  () => download("/api/drawing?frame=relaxed&fmt=dxf", "lines-relaxed.dxf", "DXF"));
 $("place").addEventListener("click", placeParallel);
 $("clear").addEventListener("click", () => setLines([]));
 for (const k of NUM) $(k).addEventListener("input", () => { draw(); schedulePredict(); });
