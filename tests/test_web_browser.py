@@ -4,7 +4,8 @@ Playwright drives Chromium (the system's ``/usr/bin/chromium``, or ``UNDULATE_CH
 load the page, place lines, see the prediction, draw a line, see a clear error, refuse an
 SVG over the size limit with one line, run a small simulation to the end, see its shape in the
 3D view (drawn, turned by a drag, zoomed by the wheel, reset by a double-click), download its
-metrics, the G-code and a drawing. No script errors on the way. Skipped where no browser is
+metrics, its 3D model (.glb), the G-code and drawings (SVG, DXF); edit lines on the grid
+(draw, undo, redo, select, delete, move). No script errors on the way. Skipped where no browser is
 installed, unless ``UNDULATE_REQUIRE_BROWSER=1`` (CI sets it), where that is a failure.
 """
 
@@ -242,5 +243,83 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         other.locator("#prediction tbody tr").first.wait_for()
         assert other.evaluate("fetch('/api/jobs').then((r) => r.json())") == []
         assert other.locator("#job").is_hidden()
+        assert errors == [], errors
+        browser.close()
+
+
+def _drag(page, x0: float, y0: float, x1: float, y1: float) -> None:
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    page.mouse.move(x1, y1, steps=6)
+    page.mouse.up()
+
+
+def _points(page) -> list[list[tuple[float, float]]]:
+    return page.evaluate("""() => [...document.querySelectorAll('#lines-layer polyline')]
+        .map((p) => p.getAttribute('points').trim().split(/\\s+/)
+        .map((q) => q.split(',').map(Number)))""")
+
+
+def test_editing_lines_grid_select_move_delete_undo(server: str) -> None:
+    """Draw two lines on the 5 mm grid, undo and redo, select, delete and move one; each
+    line shows its length and angle in mm and degrees."""
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, args=ARGS,
+                                     chromium_sandbox=False)
+        page = browser.new_page(viewport={"width": 1500, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+        page.goto(server)
+        rows = page.locator("#prediction tbody tr")
+        rows.first.wait_for()
+        assert page.locator("#undo").is_disabled()  # the page's start is not a change
+        page.click("#clear")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 0")
+        assert page.locator("#grid-layer line").count() > 50  # the 5 mm grid is drawn
+        box = page.locator("#fabric").bounding_box()
+        x0, x1 = box["x"] + box["width"] * 0.3, box["x"] + box["width"] * 0.6
+        _drag(page, x0, box["y"] + box["height"] * 0.3, x1, box["y"] + box["height"] * 0.3)
+        _drag(page, x0, box["y"] + box["height"] * 0.7, x1, box["y"] + box["height"] * 0.7)
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 2")
+        pts = _points(page)
+        assert len(pts) == 2
+        for line in pts:  # snapped to the grid
+            for x, y in line:
+                assert x % 5 == 0 and y % 5 == 0, line
+        labels = page.locator("#lines-layer text").all_text_contents()
+        length = pts[0][1][0] - pts[0][0][0]
+        assert labels[0] == f"{length:g} mm, 0°", labels
+        # undo the second line, redo it, undo it again (keyboard)
+        page.keyboard.press("Control+z")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 1")
+        page.keyboard.press("Control+Shift+z")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 2")
+        page.keyboard.press("Control+z")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 1")
+        # select the remaining line by clicking it; Delete removes it; undo brings it back
+        line = page.locator("#lines-layer polyline").first
+        lb = line.bounding_box()
+        page.mouse.click(lb["x"] + lb["width"] / 2, lb["y"] + lb["height"] / 2)
+        assert "selected" in (line.get_attribute("class") or "")
+        assert page.locator("#delete").is_enabled()
+        page.keyboard.press("Delete")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 0")
+        page.click("#undo")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 1")
+        before = _points(page)[0]
+        # drag it about 20 mm to the right: it moves by whole grid steps, one undoable change
+        lb = page.locator("#lines-layer polyline").first.bounding_box()
+        cx, cy = lb["x"] + lb["width"] / 2, lb["y"] + lb["height"] / 2
+        mm = box["width"] / 320.0  # the drawing shows 320 mm across
+        _drag(page, cx, cy, cx + 21 * mm, cy)
+        after = _points(page)[0]
+        dx = after[0][0] - before[0][0]
+        same_y = all(a[1] == b[1] for a, b in zip(after, before, strict=True))
+        assert dx in (15, 20, 25) and same_y, (before, after)
+        page.keyboard.press("Control+z")  # the move is undone as one change
+        t0 = time.time()
+        while _points(page)[0] != before and time.time() - t0 < 10:
+            time.sleep(0.05)
+        assert _points(page)[0] == before
         assert errors == [], errors
         browser.close()

@@ -16,25 +16,118 @@ function params() {
   return p;
 }
 
+const SVGNS = "http://www.w3.org/2000/svg";
+let selected = null;     // id of the selected line (click a line; Delete removes it)
+const past = [];         // undo: earlier states of `lines` (Ctrl+Z)
+const future = [];       // redo (Ctrl+Shift+Z)
+
+function lineLength(l) {
+  let s = 0;
+  for (let k = 1; k < l.points.length; k++) {
+    s += Math.hypot(l.points[k][0] - l.points[k - 1][0], l.points[k][1] - l.points[k - 1][1]);
+  }
+  return s;
+}
+
+function lineAngle(l) {  // of the chord, to the stretch (x), in degrees, -90..90
+  const [a, b] = [l.points[0], l.points[l.points.length - 1]];
+  let deg = Math.atan2(b[1] - a[1], b[0] - a[0]) * 180 / Math.PI;
+  if (deg > 90) deg -= 180;
+  if (deg <= -90) deg += 180;
+  return deg;
+}
+
 function draw() {
   const g = $("lines-layer");
   g.innerHTML = "";
   const b = Math.max(Number($("b").value) || 1, 0.3);
   for (const l of lines) {
-    const pl = document.createElementNS("http://www.w3.org/2000/svg", "polyline");
+    const pl = document.createElementNS(SVGNS, "polyline");
     pl.setAttribute("points", l.points.map(([x, y]) => `${x},${-y}`).join(" "));
-    pl.setAttribute("class", "line");
+    pl.setAttribute("class", l.id === selected ? "line selected" : "line");
     pl.setAttribute("fill", "none");
     pl.setAttribute("stroke-width", String(b));
     pl.dataset.id = l.id;
     g.appendChild(pl);
+    // its length and angle beside it, in mm and degrees
+    const [x, y] = l.points[l.points.length - 1];
+    const t = document.createElementNS(SVGNS, "text");
+    t.setAttribute("x", String(x + 2));
+    t.setAttribute("y", String(-y - 2));
+    t.setAttribute("class", "line-label");
+    t.dataset.id = l.id;
+    t.textContent = `${fmt(lineLength(l), 4)} mm, ${fmt(lineAngle(l), 3)}°`;
+    g.appendChild(t);
   }
+  $("undo").disabled = !past.length;
+  $("redo").disabled = !future.length;
+  $("delete").disabled = selected === null;
 }
 
 function setLines(newLines) {
+  // every change of the lines goes through here: it can be undone
+  past.push(lines);
+  if (past.length > 200) past.shift();
+  future.length = 0;
   lines = newLines;
+  if (!lines.some((l) => l.id === selected)) selected = null;
   draw();
   schedulePredict();
+}
+
+function undo() {
+  if (!past.length) return;
+  future.push(lines);
+  lines = past.pop();
+  if (!lines.some((l) => l.id === selected)) selected = null;
+  draw();
+  schedulePredict();
+}
+
+function redo() {
+  if (!future.length) return;
+  past.push(lines);
+  lines = future.pop();
+  if (!lines.some((l) => l.id === selected)) selected = null;
+  draw();
+  schedulePredict();
+}
+
+function deleteSelected() {
+  if (selected === null) return;
+  const id = selected;
+  selected = null;
+  setLines(lines.filter((l) => l.id !== id));
+}
+
+function gridStep() { return Number($("grid").value) || 0; }
+
+function snapValue(v) {  // to the grid when it is on, else to 0.5 mm
+  const g = gridStep() || 0.5;
+  return Math.round(v / g) * g;
+}
+
+function drawGrid() {
+  const g = $("grid-layer");
+  g.innerHTML = "";
+  const step = gridStep();
+  if (!step) return;
+  const major = step * (step < 5 ? 10 : 5);
+  for (const [lo, hi, vertical] of [[-160, 160, true], [-110, 110, false]]) {
+    for (let v = Math.ceil(lo / step) * step; v <= hi + 1e-9; v += step) {
+      const ln = document.createElementNS(SVGNS, "line");
+      const isMajor = Math.abs(v / major - Math.round(v / major)) < 1e-6;
+      ln.setAttribute("class", isMajor ? "grid major" : "grid");
+      if (vertical) {
+        ln.setAttribute("x1", v); ln.setAttribute("x2", v);
+        ln.setAttribute("y1", -110); ln.setAttribute("y2", 110);
+      } else {
+        ln.setAttribute("y1", -v); ln.setAttribute("y2", -v);
+        ln.setAttribute("x1", -160); ln.setAttribute("x2", 160);
+      }
+      g.appendChild(ln);
+    }
+  }
 }
 
 function placeParallel() {
@@ -123,11 +216,22 @@ function toFabric(evt) {
   pt.x = evt.clientX;
   pt.y = evt.clientY;
   const p = pt.matrixTransform(svg.getScreenCTM().inverse());
-  return [Math.round(p.x * 2) / 2, Math.round(-p.y * 2) / 2];
+  return [snapValue(p.x), snapValue(-p.y)];
 }
 
 let start = null;
+let moving = null;       // {id, from: [x, y], points, moved}: dragging the selected line
 $("fabric").addEventListener("pointerdown", (e) => {
+  $("fabric").setPointerCapture?.(e.pointerId);  // the drag goes on outside the drawing
+  const id = e.target.dataset ? e.target.dataset.id : undefined;
+  if (id !== undefined) {  // on a line (or its label): select it, a drag moves it
+    selected = id;
+    const l = lines.find((q) => q.id === id);
+    moving = { id, from: toFabric(e), points: l.points, moved: false };
+    draw();
+    return;
+  }
+  if (selected !== null) { selected = null; draw(); }
   start = toFabric(e);
   const r = $("rubber");
   r.setAttribute("x1", start[0]); r.setAttribute("y1", -start[1]);
@@ -135,11 +239,30 @@ $("fabric").addEventListener("pointerdown", (e) => {
   r.setAttribute("visibility", "visible");
 });
 $("fabric").addEventListener("pointermove", (e) => {
+  if (moving) {
+    const [x, y] = toFabric(e);
+    const dx = x - moving.from[0], dy = y - moving.from[1];
+    if (dx || dy) moving.moved = true;
+    const shifted = moving.points.map(([px, py]) => [px + dx, py + dy]);
+    // shown while dragging; one undoable change when the button is released
+    lines = lines.map((q) => (q.id === moving.id ? { ...q, points: shifted } : q));
+    draw();
+    return;
+  }
   if (!start) return;
   let [x, y] = toFabric(e);
   if ($("snap").checked) y = start[1];
   $("rubber").setAttribute("x2", x); $("rubber").setAttribute("y2", -y);
 });
+$("fabric").addEventListener("pointerup", () => {
+  if (!moving) return;
+  const m = moving;
+  moving = null;
+  if (!m.moved) return;
+  const now = lines;
+  lines = lines.map((q) => (q.id === m.id ? { ...q, points: m.points } : q));
+  setLines(now);
+}, true);
 $("fabric").addEventListener("pointerup", (e) => {
   if (!start) return;
   let [x, y] = toFabric(e);
@@ -399,6 +522,24 @@ $("dxf-print").addEventListener("click",
 $("dxf-relaxed").addEventListener("click",
   () => download("/api/drawing?frame=relaxed&fmt=dxf", "lines-relaxed.dxf", "DXF"));
 $("place").addEventListener("click", placeParallel);
+$("undo").addEventListener("click", undo);
+$("redo").addEventListener("click", redo);
+$("delete").addEventListener("click", deleteSelected);
+$("grid").addEventListener("change", drawGrid);
+document.addEventListener("keydown", (e) => {
+  const typing = ["INPUT", "SELECT", "TEXTAREA"].includes(document.activeElement?.tagName);
+  const mod = e.ctrlKey || e.metaKey;
+  if (mod && e.key.toLowerCase() === "z" && !typing) {
+    e.preventDefault();
+    if (e.shiftKey) redo(); else undo();
+  } else if (mod && e.key.toLowerCase() === "y" && !typing) {
+    e.preventDefault();
+    redo();
+  } else if ((e.key === "Delete" || e.key === "Backspace") && !typing && selected !== null) {
+    e.preventDefault();
+    deleteSelected();
+  }
+});
 $("clear").addEventListener("click", () => setLines([]));
 for (const k of NUM) $(k).addEventListener("input", () => { draw(); schedulePredict(); });
 
@@ -426,5 +567,8 @@ async function restoreLatestJob() {
   }
 }
 
+drawGrid();
 placeParallel();
+past.length = 0;  // the first lines are the page's start, not a change to undo
+draw();
 restoreLatestJob();
