@@ -98,3 +98,47 @@ def test_executable_that_does_not_load_back_is_not_written(cache_dir: Path,
     out = CachedJit(_kernel, "test.kernel")(x, w)
     assert np.allclose(np.asarray(out[0]), np.sum(np.sin(x) * w, axis=1))
     assert not list((cache_dir / "exe").glob("test.kernel-*.xlaexe")) and marker.is_file()
+
+
+def test_cache_is_pruned_least_recently_used_first(tmp_path, monkeypatch) -> None:
+    import os
+
+    from undulate.mechanics import compiled
+
+    monkeypatch.setenv("UNDULATE_JAX_CACHE_DIR", str(tmp_path))
+    (tmp_path / "exe").mkdir()
+    (tmp_path / "export").mkdir()
+    for k in range(6):  # 6 entries of 1 MB, the older the smaller k
+        p = tmp_path / ("exe" if k % 2 else "export") / f"kernel{k}"
+        p.write_bytes(b"x" * 2**20)
+        os.utime(p, (1000.0 + k, 1000.0 + k))
+    assert compiled.cache_usage() == (6, 6 * 2**20)
+    monkeypatch.setenv("UNDULATE_JAX_CACHE_MB", "3.5")
+    assert compiled.prune_cache() == 3 * 2**20
+    left = sorted(p.name for d in ("exe", "export") for p in (tmp_path / d).iterdir())
+    assert left == ["kernel3", "kernel4", "kernel5"]
+    assert compiled.clear_cache() == (3, 3 * 2**20)
+    assert compiled.cache_usage() == (0, 0)
+
+
+def test_cold_start_is_announced_until_the_kernels_are_kept(tmp_path, monkeypatch) -> None:
+    from typer.testing import CliRunner
+
+    from undulate.interfaces.cli import app
+    from undulate.mechanics import compiled
+
+    monkeypatch.setenv("UNDULATE_JAX_CACHE_DIR", str(tmp_path))
+    first = compiled.cold_start_notice()
+    assert first is not None and "compiling kernels once" in first
+    assert f"about {compiled.COLD_START_GUESS_S:.0f} s" in first
+    compiled.mark_warm(12.3)
+    assert compiled.cold_start_notice() is None
+    # another version (another source digest): announced with the time measured here
+    compiled._source_digest.cache_clear()
+    monkeypatch.setattr(compiled, "_source_digest", lambda parts=None: "f" * 64)
+    assert "about 12 s" in (compiled.cold_start_notice() or "")
+    res = CliRunner().invoke(app, ["cache"])
+    assert res.exit_code == 0 and str(tmp_path) in res.stdout and "0 files" in res.stdout
+    res = CliRunner().invoke(app, ["cache", "--clear"])
+    assert res.exit_code == 0 and "removed" in res.stdout
+    assert not list((tmp_path / "warm").iterdir())

@@ -12,6 +12,7 @@ Units: mm, MPa, N, s.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -170,11 +171,25 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
 
     if isinstance(case, dict):
         case = case_from_dict(case)
+    from .mechanics.compiled import cold_start_notice, mark_warm
+
     staged = StagedDir(out, overwrite=overwrite) if out is not None else None
     try:
         if stage is not None:
             stage("set-up: mesh, pre-stretch, printing")
-        result = simulate(case, progress)
+        cold = cold_start_notice() is not None
+        t0 = time.perf_counter()
+        first_step: list[float] = []
+
+        def timed(frac: float, rec: dict) -> None:
+            if not first_step:  # set-up and the first release step: where kernels compile
+                first_step.append(time.perf_counter() - t0)
+            if progress is not None:
+                progress(frac, rec)
+
+        result = simulate(case, timed)
+        if cold:
+            mark_warm(first_step[0] if first_step else time.perf_counter() - t0)
         return _record_and_write(result, staged, artifacts, stage)
     finally:
         if staged is not None:

@@ -17,6 +17,7 @@ docs/errors.md lists them.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -100,7 +101,11 @@ class _Reporter:
 
 def _simulate_and_report(case, out: Path, overwrite: bool) -> None:
     from .. import api
+    from ..mechanics.compiled import cold_start_notice
 
+    notice = cold_start_notice()
+    if notice:  # before the bar, so that it stays on the screen (and in a log)
+        typer.echo(notice, err=True)
     try:
         # the destination is checked (and its staging folder made) before anything runs
         with _Reporter(case) as rep:
@@ -179,6 +184,31 @@ def run(
             typer.echo(f"Error: {line}", err=True)
         raise _fail(lines[-1]) from None
     _simulate_and_report(case, out, overwrite)
+
+
+@app.command()
+def cache(
+    clear: Annotated[bool, typer.Option("--clear", help="remove every compiled kernel (the "
+                                        "next run compiles them again)")] = False,
+) -> None:
+    """Where undulate keeps its compiled kernels and how large that is; --clear empties it.
+
+    Location: ~/.cache/undulate/jax, or UNDULATE_JAX_CACHE_DIR (UNDULATE_JAX_CACHE=0: no
+    cache). It is pruned to UNDULATE_JAX_CACHE_MB (default 150 MB), least recently used first.
+    """
+    from ..mechanics.compiled import _limit_bytes, cache_root, cache_usage, clear_cache
+
+    root = cache_root()
+    if root is None:
+        typer.echo("kernel cache: off (UNDULATE_JAX_CACHE=0)")
+        return
+    if clear:
+        n, size = clear_cache(root)
+        typer.echo(f"kernel cache: {root}: removed {n} files, {size / 2**20:.1f} MB")
+        return
+    n, size = cache_usage(root)
+    typer.echo(f"kernel cache: {root}: {n} files, {size / 2**20:.1f} MB (kept under "
+               f"{_limit_bytes() / 2**20:.0f} MB, UNDULATE_JAX_CACHE_MB)")
 
 
 def _register_subcommands() -> None:

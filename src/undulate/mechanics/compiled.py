@@ -26,16 +26,28 @@ a marker file ``<exe>.none`` records it and later processes compile through JAX'
 before.
 
 ``UNDULATE_JAX_CACHE=0`` turns all of this off (plain ``jax.jit``).
+
+**Size.** Every edit of undulate, new mesh size or rod count makes new entries (~6 MB for the
+demo's kernels). After each new entry the cache is pruned to ``UNDULATE_JAX_CACHE_MB``
+(default :data:`DEFAULT_LIMIT_MB`), least recently used files first (a load sets an
+executable's access time; the file itself is not rewritten). ``undulate cache`` shows where
+it is and how large; ``undulate cache --clear`` empties it.
+
+**Cold start.** The first run of an undulate version on a machine traces and compiles its
+kernels; :func:`cold_start_notice` says so beforehand, with the time the last cold start here
+took (:func:`mark_warm` records it).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
 import pickle
 import platform
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -46,7 +58,14 @@ import numpy as np
 
 from ..fileio import atomic_path
 
-__all__ = ["CachedJit", "cache_root"]
+__all__ = ["CachedJit", "cache_root", "cache_usage", "clear_cache", "prune_cache",
+           "cold_start_notice", "mark_warm", "DEFAULT_LIMIT_MB"]
+
+#: the cache is pruned to this many MB unless ``UNDULATE_JAX_CACHE_MB`` says otherwise
+DEFAULT_LIMIT_MB = 150
+#: what a cold start is said to take when none was measured on this machine yet [s]
+COLD_START_GUESS_S = 30.0
+_SUBDIRS = ("export", "exe")
 
 
 def cache_root() -> Path | None:
@@ -56,6 +75,107 @@ def cache_root() -> Path | None:
     return Path(os.environ.get(
         "UNDULATE_JAX_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "undulate", "jax")
     ))
+
+
+def _entries(root: Path) -> list[Path]:
+    return [p for d in _SUBDIRS if (root / d).is_dir() for p in (root / d).iterdir()
+            if p.is_file()]
+
+
+def cache_usage(root: Path | None = None) -> tuple[int, int]:
+    """(number of files, bytes) of the kernel cache."""
+    root = root if root is not None else cache_root()
+    if root is None or not root.is_dir():
+        return 0, 0
+    files = _entries(root)
+    return len(files), sum(p.stat().st_size for p in files)
+
+
+def clear_cache(root: Path | None = None) -> tuple[int, int]:
+    """Remove every cached program, executable and warm marker; (files, bytes) removed."""
+    root = root if root is not None else cache_root()
+    n, size = cache_usage(root)
+    if root is None or not root.is_dir():
+        return 0, 0
+    targets = _entries(root)
+    if (root / "warm").is_dir():
+        targets += list((root / "warm").iterdir())
+    for p in targets:
+        p.unlink(missing_ok=True)
+    return n, size
+
+
+def _limit_bytes() -> int:
+    raw = os.environ.get("UNDULATE_JAX_CACHE_MB", "")
+    try:
+        mb = float(raw) if raw else float(DEFAULT_LIMIT_MB)
+    except ValueError:
+        mb = float(DEFAULT_LIMIT_MB)
+    return int(max(mb, 0.0) * 2**20)
+
+
+def prune_cache(root: Path | None = None, limit: int | None = None) -> int:
+    """Remove the least recently used entries until the cache holds at most ``limit`` bytes
+    (default: ``UNDULATE_JAX_CACHE_MB``, else :data:`DEFAULT_LIMIT_MB`); bytes removed."""
+    root = root if root is not None else cache_root()
+    if root is None or not root.is_dir():
+        return 0
+    limit = _limit_bytes() if limit is None else limit
+    stats = []
+    for p in _entries(root):
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        stats.append((max(st.st_atime, st.st_mtime), st.st_size, p))
+    total = sum(size for _, size, _ in stats)
+    removed = 0
+    for _, size, p in sorted(stats, key=lambda t: t[0]):
+        if total - removed <= limit:
+            break
+        try:
+            p.unlink()
+            removed += size
+        except OSError:
+            pass
+    return removed
+
+
+def _warm_marker(root: Path) -> Path:
+    return root / "warm" / f"{_source_digest()[:24]}-{_machine_digest()[:12]}"
+
+
+def cold_start_notice() -> str | None:
+    """A line to show before a run that will trace and compile the kernels (the first run of
+    this undulate version on this machine), or None when it will load them from the cache."""
+    root = cache_root()
+    if root is None:
+        return None
+    if _warm_marker(root).is_file():
+        return None
+    guess = COLD_START_GUESS_S
+    last = sorted((root / "warm").glob("*"), key=lambda p: p.stat().st_mtime) \
+        if (root / "warm").is_dir() else []
+    for p in reversed(last):
+        try:
+            guess = float(p.read_text().strip())
+            break
+        except (OSError, ValueError):
+            continue
+    return (f"compiling kernels once for this version of undulate, about {guess:.0f} s "
+            f"(kept in {root}; later runs load them)")
+
+
+def mark_warm(seconds: float) -> None:
+    """Record that this version's kernels are in the cache; ``seconds``: what it took."""
+    root = cache_root()
+    if root is None:
+        return
+    try:
+        with atomic_path(_warm_marker(root)) as tmp:
+            Path(tmp).write_text(f"{seconds:.1f}\n")
+    except OSError:
+        pass
 
 
 @functools.cache
@@ -154,7 +274,10 @@ class CachedJit:
         if exe_path.is_file():
             try:
                 payload, in_tree, out_tree = pickle.loads(exe_path.read_bytes())
-                return serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+                loaded = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+                with contextlib.suppress(OSError):  # recently used (access time): pruned last
+                    os.utime(exe_path, ns=(time.time_ns(), exe_path.stat().st_mtime_ns))
+                return loaded
             except Exception:  # noqa: BLE001 - a damaged entry is made again
                 pass
         path = root / "export" / f"{self.name}-{digest}.jaxexport"
@@ -192,6 +315,7 @@ class CachedJit:
         try:
             with atomic_path(exe_path if keep else marker) as tmp:
                 Path(tmp).write_bytes(blob if keep else b"")
+            prune_cache(root)
         except OSError:
             pass  # an unwritable cache only costs the next process a compilation
         return compiled
