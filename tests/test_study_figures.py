@@ -134,3 +134,24 @@ def test_linear_regime_stops_at_first_single_arch() -> None:
     assert fit is not None and fit["h_below"] == 0.5 and fit["n_points"] == 4
     assert fit["n_min"] == 5
     assert fit["slope"] == pytest.approx(61.0, rel=0.02)
+
+
+def test_up_down_radii_on_the_centre_line_and_on_the_fabric() -> None:
+    from undulate.study.derived import up_down_radii
+
+    d = 0.35  # (t + h) / 2 for h = 0.3, t = 0.4
+    df = pd.DataFrame({
+        "status": ["ok", "ok", "ok", "ok"],
+        "n_mode": [7, 5, 3, 9],
+        "h": [0.3, 0.3, 0.3, 0.3], "t": [0.4] * 4,
+        # even bond-line arcs (R = 5 at the fabric), a run with crests more curved there,
+        # n = 3 (end arcs only on one side: left out), unresolved arcs (left out)
+        "R_up_mean": [5.0 + d, 4.5 + d, 9.0, 1.0], "R_down_mean": [5.0 - d, 5.0 - d, 5.0, 0.5],
+        "r2_arcs_mean": [0.99, 0.99, 0.99, 0.4],
+    })
+    r = up_down_radii(df)
+    assert r is not None and r["n"] == 2
+    assert r["centre_min"] == pytest.approx(5.35 / 4.65)  # the offset's geometry alone
+    assert r["fabric_max"] == pytest.approx(1.0)
+    assert r["fabric_min"] == pytest.approx(0.9) and r["fabric_below_1"] == 1
+    assert r["centre_below_1"] == 0

@@ -15,6 +15,7 @@ from ..model.config import MATERIAL_DEFAULTS
 
 __all__ = [
     "theory",
+    "up_down_radii",
     "ok_rows",
     "n_values",
     "is_swept",
@@ -189,6 +190,47 @@ def arcs_beat_sines(df: pd.DataFrame) -> dict[str, float] | None:
         return None
     wins = int((ra[m] > rs[m]).sum())
     return {"fraction": wins / int(m.sum()), "wins": wins, "n": int(m.sum())}
+
+
+#: arc-chain fits with a lower R^2 do not resolve the arcs (too few nodes per arc)
+ARCS_RESOLVED_R2 = 0.9
+
+
+def up_down_radii(df: pd.DataFrame, n_min: int = 5) -> dict[str, Any] | None:
+    """R_up / R_down of the interior arcs, on the rod's centre line and on the fabric under it.
+
+    The centre line sits d = (t + h) / 2 above the fabric's mid-surface (the bond), outside
+    the bond line at a crest and inside it at a trough. Circular arcs offset by d stay circular
+    with radius R -/+ d, so on the fabric line ``R_up_fabric = R_up - d`` and
+    ``R_down_fabric = R_down + d``: even bond-line arcs of equal radius give R_up - R_down =
+    t + h on the centre line. Runs with ``n >= n_min`` (two or more interior arcs of each sign;
+    for n = 3 one side would be end arcs only), both radii and resolved arcs (arc-chain R^2 at
+    least :data:`ARCS_RESOLVED_R2`). None when no run qualifies.
+    """
+    d = ok_rows(df)
+    need = {"R_up_mean", "R_down_mean", "h", "t"}
+    if d.empty or not need <= set(d.columns):
+        return None
+    n = n_values(d)
+    up = pd.to_numeric(d["R_up_mean"], errors="coerce")
+    down = pd.to_numeric(d["R_down_mean"], errors="coerce")
+    m = (n >= n_min) & up.notna() & down.notna()
+    if "r2_arcs_mean" in d:  # resolved arcs only (at h = 0.08 mm five nodes span an arc)
+        m &= pd.to_numeric(d["r2_arcs_mean"], errors="coerce") >= ARCS_RESOLVED_R2
+    if "rods.offset" in d:  # a set-up that moves the centre line: its own offset
+        off = pd.to_numeric(d["rods.offset"], errors="coerce")
+    else:
+        off = pd.Series(float("nan"), index=d.index)
+    dd = off.where(off.notna(), (d["t"] + d["h"]) / 2.0)
+    if not m.any():
+        return None
+    centre = (up / down)[m]
+    fabric = ((up - dd) / (down + dd))[m]
+    return {"n": int(m.sum()), "n_min": n_min,
+            "centre_median": float(centre.median()), "centre_min": float(centre.min()),
+            "centre_max": float(centre.max()), "centre_below_1": int((centre < 1).sum()),
+            "fabric_median": float(fabric.median()), "fabric_min": float(fabric.min()),
+            "fabric_max": float(fabric.max()), "fabric_below_1": int((fabric < 1).sum())}
 
 
 def hstar_ratios(df: pd.DataFrame, n_nominal: int | None = None) -> list[dict[str, Any]]:

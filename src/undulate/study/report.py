@@ -24,6 +24,7 @@ from .derived import (
     hstar_ratios,
     onset_summary,
     theory,
+    up_down_radii,
 )
 from .figures import make_figures
 from .named_setups import describe_setup
@@ -116,6 +117,19 @@ def build_report(
                if "n_multi" in ons else ""),
             "",
         ]
+    ud = up_down_radii(df)
+    if ud:
+        lines += [
+            f"**Up vs down arcs** (interior arcs, runs with n >= {ud['n_min']}, {ud['n']} runs): "
+            f"R_up / R_down on the rods' centre line median {_f(ud['centre_median'], '.3f')} "
+            f"({_f(ud['centre_min'], '.3f')}-{_f(ud['centre_max'], '.3f')}, below 1 in "
+            f"{ud['centre_below_1']}); on the fabric under the rods (the bond line, d = "
+            f"(t + h) / 2 below the centre line: R_up - d, R_down + d) median "
+            f"{_f(ud['fabric_median'], '.3f')} ({_f(ud['fabric_min'], '.3f')}-"
+            f"{_f(ud['fabric_max'], '.3f')}, below 1, crests more curved, in "
+            f"{ud['fabric_below_1']}).",
+            "",
+        ]
     ratios = hstar_ratios(df, meta.get("definition", {}).get("N_nominal"))
     if ratios:
         r0 = ratios[0]
@@ -139,7 +153,7 @@ def build_report(
                 f"{_f(r['ratio'], '.3f')} | {_f(inv, '.3f')} | {_f(r['bundling'], '.3f')} |"
             )
         lines.append("")
-    if not (fit or exps or arcs or ons or ratios):
+    if not (fit or exps or arcs or ons or ud or ratios):
         lines += ["No comparison possible with the data present.", ""]
     lines += _cost_lines(df)
     if n_failed and "error" in df:
