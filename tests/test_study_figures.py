@@ -151,7 +151,7 @@ def test_up_down_radii_on_the_centre_line_and_on_the_fabric() -> None:
     })
     r = up_down_radii(df)
     assert r is not None and r["n"] == 2
-    assert r["centre_min"] == pytest.approx(5.35 / 4.65)  # the offset's geometry alone
+    assert r["centre_max"] == pytest.approx(5.35 / 4.65)  # the offset's geometry alone
     assert r["fabric_max"] == pytest.approx(1.0)
     assert r["fabric_min"] == pytest.approx(0.9) and r["fabric_below_1"] == 1
     assert r["centre_below_1"] == 0
