@@ -35,7 +35,9 @@ if not CHROMIUM:
                            "chromium, or set UNDULATE_CHROMIUM)")
     pytest.skip("no chromium on this machine", allow_module_level=True)
 
-ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+# WebGL (the 3D view) runs on SwiftShader, Chromium's software renderer
+ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+        "--disable-quic", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
@@ -67,18 +69,37 @@ def _set(page, field: str, value: float) -> None:
     page.fill(f"#{field}", str(value))
 
 
-# pixels of the 3D view: drawn (not transparent) and of the rods' colour (#1b5e9b)
-CANVAS_PIXELS = """() => {
+# pixels of the 3D view (a WebGL canvas, read through its PNG): drawn (not the background
+# #fbfbfb) and of the rods' orange (glTF base colour 230, 110, 40, lit)
+CANVAS_PIXELS = """async () => {
   const cv = document.querySelector('#view3d');
-  const d = cv.getContext('2d').getImageData(0, 0, cv.width, cv.height).data;
+  const url = cv.toDataURL();
+  const img = new Image();
+  img.src = url;
+  await img.decode();
+  const c2 = document.createElement('canvas');
+  c2.width = cv.width;
+  c2.height = cv.height;
+  const g = c2.getContext('2d');
+  g.drawImage(img, 0, 0);
+  const d = g.getImageData(0, 0, c2.width, c2.height).data;
   let drawn = 0, rod = 0;
   for (let i = 0; i < d.length; i += 4) {
-    if (d[i + 3] > 0) drawn++;
-    if (Math.abs(d[i] - 27) < 12 && Math.abs(d[i + 1] - 94) < 12 && Math.abs(d[i + 2] - 155) < 12)
-      rod++;
+    if (Math.abs(d[i] - 251) + Math.abs(d[i + 1] - 251) + Math.abs(d[i + 2] - 251) > 12) drawn++;
+    if (d[i] > d[i + 1] + 40 && d[i] > d[i + 2] + 60) rod++;
   }
-  return { drawn, rod, total: cv.width * cv.height, url: cv.toDataURL() };
+  return { drawn, rod, total: cv.width * cv.height, url };
 }"""
+
+
+def _pixels_until(page, ok, timeout: float = 20.0) -> dict:
+    """The 3D view's pixels once ``ok(pixels)`` holds (or the last ones after ``timeout``)."""
+    t0 = time.time()
+    while True:
+        px = page.evaluate(CANVAS_PIXELS)
+        if ok(px) or time.time() - t0 > timeout:
+            return px
+        time.sleep(0.1)
 
 
 def _svg_upload(page, size: int) -> None:
@@ -171,11 +192,11 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         dl.value.save_as(path)
         metrics = json.loads(path.read_text())
         assert metrics["rods"][0]["n"] == n_sim
-        # the final shape in 3D: drawn, with the rod in it
+        # the final shape in 3D (three.js, the run's .glb): drawn, with the rod in it
         page.locator("#view3d").scroll_into_view_if_needed()
-        page.wait_for_function(f"({CANVAS_PIXELS})().drawn > 0")
-        first = page.evaluate(CANVAS_PIXELS)
+        first = _pixels_until(page, lambda p: p["rod"] > 100)
         assert first["drawn"] > 0.1 * first["total"] and first["rod"] > 100, first | {"url": ""}
+        assert "drag to turn" in page.locator("#view3d-note").inner_text()
         # a drag turns it, the wheel zooms, a double-click goes back to the first view
         box = page.locator("#view3d").bounding_box()
         cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
@@ -183,14 +204,15 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         page.mouse.down()
         page.mouse.move(cx + 80, cy + 40, steps=4)
         page.mouse.up()
-        turned = page.evaluate(CANVAS_PIXELS)
+        turned = _pixels_until(page, lambda p: p["url"] != first["url"])
         assert turned["url"] != first["url"] and turned["drawn"] > 0.05 * turned["total"]
+        page.mouse.move(cx, cy)
         page.mouse.wheel(0, -400)
-        page.wait_for_function(f"({CANVAS_PIXELS})().url != {json.dumps(turned['url'])}")
-        zoomed = page.evaluate(CANVAS_PIXELS)
+        zoomed = _pixels_until(page, lambda p: p["url"] != turned["url"])
         assert zoomed["rod"] > turned["rod"], (zoomed["rod"], turned["rod"])
         page.mouse.dblclick(cx, cy)
-        page.wait_for_function(f"({CANVAS_PIXELS})().url == {json.dumps(first['url'])}")
+        again = _pixels_until(page, lambda p: p["url"] == first["url"])
+        assert again["url"] == first["url"]
         # the drawing of the line in the relaxed fabric: L / (1 + eps0) long
         with page.expect_download() as dl:
             page.click("#svg-relaxed")
@@ -236,7 +258,7 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         page.wait_for_function("document.querySelectorAll('#sim-table tbody tr').length == 1")
         again = page.locator("#sim-table tbody tr").nth(0).locator("td").nth(1).inner_text()
         assert int(again) == n_sim
-        page.wait_for_function(f"({CANVAS_PIXELS})().drawn > 0")
+        assert _pixels_until(page, lambda p: p["rod"] > 100)["rod"] > 100
         # ... and another browser (no cookie of this one) sees no job
         other = browser.new_context().new_page()
         other.goto(server)

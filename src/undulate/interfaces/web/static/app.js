@@ -391,108 +391,25 @@ function showResults(id, st) {
   }
 }
 
-// ---- 3D view of the final shape (canvas, orthographic, painter's algorithm) -------------
-// yaw turns the shape about the vertical (z); elev is the eye's height above the fabric's
-// plane (0: side view, pi/2: top view). The rods lie on top of the fabric (z > 0 side).
-const VIEW0 = { yaw: -0.5, elev: 0.55, zoom: 1 };
-const LIGHT = [-0.6, 0.3, 0.75].map((v, _, a) => v / Math.hypot(...a));  // from above, -x
-const view = Object.assign({ shape: null, drag: null }, VIEW0);
+// ---- 3D view of the final shape: the run's .glb in three.js (view3d.js, a module) --------
+function model3dReady() {  // the module loads after this script: wait for it (3 s at most)
+  return new Promise((resolve) => {
+    if (window.undulate3d) { resolve(); return; }
+    window.addEventListener("undulate3d-ready", () => resolve(), { once: true });
+    setTimeout(resolve, 3000);
+  });
+}
 
 async function loadShape(id) {
-  view.shape = null;
-  render();
-  let shape;
-  try {
-    const r = await fetch(`/api/jobs/${id}/shape`);
-    shape = await r.json();
-    if (!r.ok) throw new Error(shape.error || `HTTP ${r.status}`);
-  } catch (e) { showError(`3D view: ${e.message}`); return; }
-  const pts = shape.rods.flat();
-  const all = pts.length ? pts : shape.fabric.points;
-  if (!all.length) return;
-  const lo = [0, 1, 2].map((k) => all.reduce((m, p) => Math.min(m, p[k]), Infinity));
-  const hi = [0, 1, 2].map((k) => all.reduce((m, p) => Math.max(m, p[k]), -Infinity));
-  view.centre = lo.map((v, k) => (v + hi[k]) / 2);
-  // the rods' bounding box fits in the view whichever way it is turned
-  view.radius = Math.max(Math.hypot(...hi.map((v, k) => v - lo[k])) / 2, 5);
-  view.rodWidth = Number($("b").value) || 1;
-  Object.assign(view, VIEW0);
-  view.shape = shape;
-  render();
-}
-
-function render() {
+  await model3dReady();
   const cv = $("view3d");
-  const ctx = cv.getContext("2d");
-  ctx.clearRect(0, 0, cv.width, cv.height);
-  if (!view.shape) return;
-  const [cx, cy, cz] = view.centre;
-  const cyw = Math.cos(view.yaw), syw = Math.sin(view.yaw);
-  const ce = Math.cos(view.elev), se = Math.sin(view.elev);
-  const s = view.zoom * 0.47 * Math.min(cv.width, cv.height) / view.radius;  // px per mm
-  // screen right = the yawed x; screen up = se * y' + ce * z; depth grows away from the eye
-  const proj = (p) => {
-    const x = p[0] - cx, y = p[1] - cy, z = p[2] - cz;
-    const xr = cyw * x - syw * y, yr = syw * x + cyw * y;
-    const up = se * yr + ce * z, depth = ce * yr - se * z;
-    return [cv.width / 2 + s * xr, cv.height / 2 - s * up, depth];
-  };
-  const F = view.shape.fabric;
-  const P = F.points.map(proj);
-  const items = F.triangles.map((t) => {
-    const [a, b, c] = t.map((i) => F.points[i]);
-    const u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    const v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-    const n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-    const len = (Math.hypot(...n) || 1) * (n[2] < 0 ? -1 : 1);  // normal up
-    const light = Math.max(0, (n[0] * LIGHT[0] + n[1] * LIGHT[1] + n[2] * LIGHT[2]) / len);
-    return { kind: "tri", t, depth: (P[t[0]][2] + P[t[1]][2] + P[t[2]][2]) / 3, light };
-  });
-  for (const r of view.shape.rods) {
-    const q = r.map(proj);
-    for (let k = 0; k + 1 < q.length; k++) {
-      // a little nearer than the fabric under it, so that it is drawn over it
-      items.push({ kind: "rod", a: q[k], b: q[k + 1], depth: (q[k][2] + q[k + 1][2]) / 2 - 0.3 });
-    }
-  }
-  items.sort((p, q) => q.depth - p.depth);
-  ctx.lineJoin = "round";
-  ctx.lineCap = "round";
-  for (const it of items) {
-    if (it.kind === "tri") {
-      const [a, b, c] = it.t.map((i) => P[i]);
-      const g = Math.round(120 + 130 * it.light);
-      ctx.fillStyle = `rgb(${g}, ${g - 12}, ${g - 30})`;
-      ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.lineTo(c[0], c[1]);
-      ctx.closePath(); ctx.fill();
-      ctx.strokeStyle = "rgba(120, 110, 90, 0.25)"; ctx.lineWidth = 0.5; ctx.stroke();
-    } else {
-      ctx.strokeStyle = "#1b5e9b"; ctx.lineWidth = Math.max(2, s * view.rodWidth);
-      ctx.beginPath(); ctx.moveTo(it.a[0], it.a[1]); ctx.lineTo(it.b[0], it.b[1]); ctx.stroke();
-    }
-  }
+  const ok = window.undulate3d && await window.undulate3d.show(`/api/jobs/${id}/model.glb`, cv);
+  cv.hidden = !ok;
+  $("view3d-note").textContent = ok
+    ? "Final shape: drag to turn, right-drag to pan, wheel to zoom, double-click to reset."
+    : "No 3D view here (this browser has no WebGL): download the .glb below and open it in " +
+      "Blender or any glTF viewer.";
 }
-
-$("view3d").addEventListener("pointerdown", (e) => {
-  view.drag = [e.clientX, e.clientY, view.yaw, view.elev];
-  $("view3d").setPointerCapture(e.pointerId);
-});
-$("view3d").addEventListener("pointermove", (e) => {
-  if (!view.drag) return;
-  const [x0, y0, yaw0, elev0] = view.drag;
-  view.yaw = yaw0 + (e.clientX - x0) * 0.01;
-  view.elev = Math.max(0, Math.min(Math.PI / 2, elev0 + (e.clientY - y0) * 0.01));
-  render();
-});
-for (const ev of ["pointerup", "pointercancel"]) {
-  $("view3d").addEventListener(ev, () => { view.drag = null; });
-}
-$("view3d").addEventListener("wheel", (e) => {
-  e.preventDefault();
-  view.zoom = Math.max(0.2, Math.min(20, view.zoom * Math.exp(-e.deltaY * 0.001)));
-  render();
-}, { passive: false });
-$("view3d").addEventListener("dblclick", () => { Object.assign(view, VIEW0); render(); });
 
 $("simulate").addEventListener("click", simulate);
 $("cancel").addEventListener("click", async () => {
