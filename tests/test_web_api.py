@@ -353,3 +353,27 @@ def test_model_of_a_finished_job(client: TestClient, other: TestClient, fmt: str
         assert np.all(lo <= w.min(0) + 1e-3) and np.all(hi >= w.max(0) - 1e-3)
     assert other.get(f"/api/jobs/{jid}/model.{fmt}").status_code == 404  # not its job
     assert client.get(f"/api/jobs/{jid}/model.ply").status_code in (404, 422)
+
+
+def test_atlas_and_where_a_group_sits(client: TestClient) -> None:
+    from undulate.design.atlas import load_atlas
+
+    a = client.get("/api/atlas").json()
+    shipped = load_atlas()
+    assert a["meta"] == shipped.meta and len(a["points"]) == len(shipped.points)
+    m = shipped.meta
+    five = [{"points": [[-m["L"] / 2, y], [m["L"] / 2, y]]}
+            for y in (-22.0, -11.0, 0.0, 11.0, 22.0)]  # gap 10 mm for b = 1
+    body = {"lines": five, "h": 0.5, "b": m["b"], "eps0": m["eps0"], "E_B": m["E_B"],
+            "E": m["E"], "t": m["t"]}
+    g = client.post("/api/predict", json=body).json()["groups"][0]
+    assert g["atlas"]["inside"] and g["atlas"]["design_s"] == pytest.approx(10.0)
+    p = shipped.points
+    near = p.iloc[((p["h"] - 0.5).abs() / m["h_step"]
+                   + (p["s"] - 10.0).abs() / m["s_step"]).argmin()]
+    assert g["atlas"]["family"] == near["family"] and g["atlas"]["n"] == near["n"]
+    # the page's defaults differ from the diagram's modulus: outside, and it says why
+    out = client.post("/api/predict", json=body | {"E_B": 3000.0}).json()["groups"][0]
+    assert not out["atlas"]["inside"] and "E_B = 3000" in out["atlas"]["summary"]
+    one = client.post("/api/predict", json=body | {"lines": five[:1]}).json()["groups"][0]
+    assert one["atlas"]["confidence"] == "outside" and "one line alone" in one["atlas"]["summary"]

@@ -135,6 +135,11 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         cells = rows.nth(0).locator("td")
         page.wait_for_function("document.querySelector('#prediction tbody td:nth-child(2)')"
                                ".textContent == '40'")
+        # where the group sits in the simulated phase diagram: three lines of 40 mm are
+        # outside the five-rod diagram (marked dashed), and the panel says why
+        page.wait_for_function("document.querySelectorAll('#atlas circle.outside').length == 1")
+        assert page.locator("#atlas rect").count() > 10
+        assert "outside the simulated diagram (N = 3" in page.locator("#atlas-where").inner_text()
         pm = T.phase_map(0.3, 10.0, eps0=0.5, L=40.0, N=3)
         assert int(cells.nth(3).inner_text()) == int(pm["n"].item())
         fam = str(pm["family"].item())

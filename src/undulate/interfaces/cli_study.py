@@ -406,6 +406,34 @@ def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")
     _out.print(str(write_report(directory)), highlight=False, soft_wrap=True)
 
 
+@study_app.command("atlas")
+def atlas_cmd(
+    directory: Annotated[Path, typer.Argument(help="a parallel-phase-diagram study directory")],
+    out: Annotated[Path, typer.Option("--out", help="atlas CSV to write")],
+) -> None:
+    """The phase diagram as an atlas for designs (one row per (h, s): family, n, l, lam, a).
+
+    The package ships the reference one (undulate.design.atlas): remake it with
+    undulate study atlas DIR --out src/undulate/design/data/phase_diagram.csv
+    """
+    from undulate.design.atlas import build_atlas, write_atlas
+    from undulate.study.storage import collect, read_study
+
+    if not (directory / "runs").is_dir():
+        _fail(f"{directory}: not a study directory (no runs/)")
+    meta = read_study(directory) or {}
+    if meta.get("name") != "parallel-phase-diagram":
+        _fail(f"{directory}: an atlas is made from a parallel-phase-diagram study (this one is "
+              f"{meta.get('name')!r})")
+    try:
+        atlas = build_atlas(collect(directory), setup=meta.get("definition", {}).get("setup"))
+    except ValueError as err:
+        _fail(str(err))
+    path = write_atlas(atlas, out)
+    _out.print(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs",
+               highlight=False, soft_wrap=True)
+
+
 def _exit_now(code: int) -> None:
     """Stop this process and its worker processes at once. A normal exit would first wait for
     the worker pool's threads, i.e. for the runs in flight (measured: an interrupted study

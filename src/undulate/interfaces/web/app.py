@@ -248,6 +248,29 @@ def _validation_line(err: RequestValidationError) -> str:
     return f"{where}: {e.get('msg', 'invalid')}{shown}"
 
 
+def _locate_groups(out: dict[str, Any], p: Params) -> None:
+    """Each group of parallel lines placed on the simulated phase diagram (``atlas``)."""
+    from ...design.atlas import load_atlas, locate
+
+    atlas = load_atlas()
+    by_id = {r["id"]: r for r in out["lines"]}
+    for g in out["groups"]:
+        members = [by_id[i] for i in g["lines"]]
+        live = [r for r in members if r.get("n")]
+        if not live:
+            continue
+        if g.get("s") is None:  # one line alone: the diagram is of five rods
+            g["atlas"] = {"inside": False, "confidence": "outside", "summary": (
+                f"one line alone: the simulated diagram is of {atlas.meta.get('N', 5)} "
+                "parallel lines")}
+            continue
+        r0 = live[0]
+        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"],
+                     L=sum(r["L"] for r in live) / len(live), eps0=r0["eps_line"],
+                     E_B=p.E_B, E=p.E, t=p.t, b=r0["b"])
+        g["atlas"] = loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"]}
+
+
 def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
                max_queued: int = 16, job_target: Any = None) -> FastAPI:
     """The web application; simulations go under ``jobs_dir``, ``workers`` at a time."""
@@ -299,6 +322,7 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
         lines = _check_params(p)
         out = predict_lines(lines, h=p.h, eps0=p.eps0, b=p.b, E_B=p.E_B, E=p.E, t=p.t,
                             nu=p.nu)
+        _locate_groups(out, p)
         from ...model import ConfigError, case_from_dict
 
         try:
@@ -307,6 +331,13 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
         except (PatternError, ConfigError) as err:
             out["simulable"], out["simulable_reason"] = False, str(err)
         return out
+
+    @app.get("/api/atlas")
+    def atlas() -> dict[str, Any]:
+        """The simulated phase diagram shipped with undulate (undulate.design.atlas)."""
+        from ...design.atlas import load_atlas
+
+        return load_atlas().to_dict()
 
     @app.post("/api/pattern/svg")
     def pattern_svg(body: SvgIn) -> dict[str, Any]:

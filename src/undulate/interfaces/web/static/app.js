@@ -200,6 +200,7 @@ async function predict() {
       li.textContent = w;
       ul.appendChild(li);
     }
+    drawAtlas(r.groups);
     $("simulate").disabled = !r.simulable || job !== null;
     $("sim-note").textContent = r.simulable ? "" : r.simulable_reason;
   } catch (e) {
@@ -207,6 +208,68 @@ async function predict() {
     tbody.innerHTML = "";
     $("simulate").disabled = true;
   }
+}
+
+// ---- the simulated phase diagram (GET /api/atlas) and where each group of lines sits -----
+const FAMILY_COLOURS = { coherent: "#1f77b4", independent: "#2ca02c", rolls: "#d62728",
+  bends: "#ff7f0e", waves: "#7f7f7f", flat: "#cccccc" };
+const COLOUR_NAMES = { coherent: "blue", independent: "green", rolls: "red", bends: "orange",
+  waves: "grey", flat: "light grey" };
+let atlas = null;
+fetch("/api/atlas").then((r) => r.json()).then((a) => { atlas = a; drawAtlas(lastGroups); })
+  .catch(() => {});
+let lastGroups = [];
+
+function drawAtlas(groups) {
+  lastGroups = groups || [];
+  const svg = $("atlas");
+  if (!atlas || !svg) return;
+  svg.innerHTML = "";
+  const m = atlas.meta;
+  const [h0, h1] = [0, Math.max(m.h_range[1] + m.h_step, 0.5)];
+  const [s0, s1] = [m.s_range[0] - m.s_step, m.s_range[1] + m.s_step];
+  const X = (h) => 36 + (h - h0) / (h1 - h0) * 254;
+  const Y = (s) => 185 - (s - s0) / (s1 - s0) * 175;
+  const el = (tag, attrs, text) => {
+    const e = document.createElementNS(SVGNS, tag);
+    for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+    if (text !== undefined) e.textContent = text;
+    svg.appendChild(e);
+    return e;
+  };
+  el("line", { x1: 36, y1: 185, x2: 290, y2: 185, class: "atlas-axis" });
+  el("line", { x1: 36, y1: 185, x2: 36, y2: 10, class: "atlas-axis" });
+  for (let h = 0; h <= h1 + 1e-9; h += 0.5) {
+    el("text", { x: X(h), y: 197, class: "atlas-tick", "text-anchor": "middle" }, fmt(h));
+  }
+  for (let s = 0; s <= s1 + 1e-9; s += 10) {
+    el("text", { x: 31, y: Y(s) + 3, class: "atlas-tick", "text-anchor": "end" }, fmt(s));
+  }
+  el("text", { x: 163, y: 208, class: "atlas-tick", "text-anchor": "middle" }, "h [mm]");
+  el("text", { x: 8, y: 100, class: "atlas-tick", transform: "rotate(-90 8 100)",
+    "text-anchor": "middle" }, "s [mm]");
+  const w = Math.max(3, (X(m.h_step) - X(0)) * 0.8);
+  const hgt = Math.max(3, (Y(0) - Y(m.s_step)) * 0.8);
+  for (const p of atlas.points) {
+    const r = el("rect", { x: X(p.h) - w / 2, y: Y(p.s) - hgt / 2, width: w, height: hgt,
+      fill: FAMILY_COLOURS[p.family] || "#999", class: "atlas-point" });
+    const t = document.createElementNS(SVGNS, "title");
+    t.textContent = `h = ${p.h} mm, s = ${p.s} mm: ${p.family}, n = ${p.n}`;
+    r.appendChild(t);
+  }
+  const lines = [];
+  for (const g of lastGroups) {
+    if (!g.atlas) continue;
+    lines.push(`group ${g.index}: ${g.atlas.summary}`);
+    if (g.atlas.design_h === undefined) continue;
+    el("circle", { cx: X(g.atlas.design_h), cy: Y(g.atlas.design_s), r: 5,
+      class: g.atlas.inside ? "atlas-design" : "atlas-design outside" });
+  }
+  const fams = [...new Set(atlas.points.map((p) => p.family))];
+  $("atlas-where").textContent = lines.join("; ") + (lines.length ? ". " : "") +
+    `Simulated: ${m.points} points (${m.runs} runs), N = ${m.N}, L = ${m.L} mm, ` +
+    `eps0 = ${m.eps0}, E_B = ${m.E_B} MPa; colours: ` +
+    fams.map((f) => `${f} (${COLOUR_NAMES[f] || "grey"})`).join(", ") + ".";
 }
 
 // ---- drawing ---------------------------------------------------------------------------

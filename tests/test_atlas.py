@@ -1,0 +1,72 @@
+"""The simulated phase diagram as an atlas: one row per (h, s), majority over seeds, what was
+held fixed, and where a design sits on it (simulated here, between agreeing points, near a
+transition, outside)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from undulate.design.atlas import ATLAS_FILE, build_atlas, load_atlas, locate, write_atlas
+
+
+def _table() -> pd.DataFrame:
+    rows = []
+    for h in (0.5, 1.0):
+        for s in (0.0, 10.0, 20.0):
+            fam, n = ("coherent", 3) if h == 0.5 else ("bends", 1)
+            if s == 0.0:
+                fam = "waves" if h == 0.5 else "bends"
+            for seed in (0, 1, 2):
+                f, k = fam, n
+                if h == 1.0 and s == 20.0 and seed == 0:
+                    f, k = "coherent", 3  # one seed of three disagrees: the majority wins
+                rows.append({"status": "ok", "seed": seed, "h": h, "s": s, "family": f,
+                             "n_mode": k, "l_mean": 100.0 / k, "lam_mean": 80.0 / k,
+                             "a_mean": 10.0, "N": 1 if s == 0 else 5, "b": 5.0 if s == 0
+                             else 1.0, "L": 100.0, "eps0": 0.5, "E_B": 1000.0, "E": 0.45,
+                             "t": 0.4})
+    rows.append(dict(rows[-1], status="failed", family="flat"))
+    return pd.DataFrame(rows)
+
+
+def test_build_write_load(tmp_path: Path) -> None:
+    atlas = build_atlas(_table(), setup={"rods": {"E_B": 1000.0}})
+    p = atlas.points.set_index(["h", "s"])
+    assert len(p) == 6 and int(p.loc[(1.0, 20.0), "runs"]) == 3
+    assert p.loc[(1.0, 20.0), "family"] == "bends" and p.loc[(1.0, 20.0), "n"] == 1
+    assert p.loc[(0.5, 0.0), "family"] == "waves"
+    m = atlas.meta
+    assert m["N"] == 5 and m["b"] == 1.0 and m["L"] == 100.0 and m["E_B"] == 1000.0
+    assert m["h_step"] == 0.5 and m["s_step"] == 10.0 and m["runs"] == 18
+    back = load_atlas(write_atlas(atlas, tmp_path / "a.csv"))
+    assert back.meta == atlas.meta
+    pd.testing.assert_frame_equal(back.points, atlas.points, check_dtype=False)
+
+
+def test_locate() -> None:
+    atlas = build_atlas(_table())
+    case = {"N": 5, "L": 100.0, "eps0": 0.5, "E_B": 1000.0, "E": 0.45, "t": 0.4, "b": 1.0}
+    here = locate(atlas, h=0.5, s=10.0, **case)
+    assert here.inside and here.confidence == "simulated" and here.distance == 0
+    assert here.summary().startswith("simulated here: coherent n = 3")
+    between = locate(atlas, h=0.5, s=15.0, **case)
+    assert between.confidence == "simulated" and "agree" in between.summary()
+    edge = locate(atlas, h=0.75, s=15.0, **case)
+    assert edge.confidence == "near a transition"
+    assert {(edge.family, edge.n), *edge.alternatives} == {("coherent", 3), ("bends", 1)}
+    out = locate(atlas, h=0.5, s=10.0, **(case | {"L": 60.0, "E_B": 3000.0}))
+    assert not out.inside and out.confidence == "outside"
+    assert "L = 60, the diagram's L = 100" in out.reason and "E_B = 3000" in out.reason
+    far = locate(atlas, h=3.0, s=10.0, **case)
+    assert not far.inside and "h = 3 mm, simulated 0.5..1 mm" in far.reason
+    # s = 0 is one rod N times as wide: any N and b are that
+    assert locate(atlas, h=0.5, s=0.0, **(case | {"N": 3, "b": 1.0})).inside
+
+
+def test_the_shipped_atlas_loads() -> None:
+    atlas = load_atlas(ATLAS_FILE)
+    assert atlas.meta["N"] == 5 and atlas.meta["points"] == len(atlas.points) > 0
+    assert set(atlas.points["family"]) <= {"coherent", "independent", "rolls", "bends",
+                                           "waves", "flat"}
