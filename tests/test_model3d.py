@@ -9,25 +9,15 @@ import meshio
 import numpy as np
 import pytest
 import trimesh
+from error_cases import TINY
 from typer.testing import CliRunner
 
 from undulate.fabrication.model3d import FORMATS, export_run, rod_solid
 from undulate.interfaces.cli import app
 
-TWO_RODS = """name = "two"
-[rods]
-L = 20.0
-N = 2
-s = 4.0
-[fabric]
-margin_x = 4.0
-margin_y = 4.0
-[release]
-steps = 3
-[mesh]
-dx_rod = 2.0
-dx_far = 4.0
-"""
+# the tiny case of the error tests, with two rods 4 mm apart
+TWO_RODS = TINY.replace("[rods]\nL = 20.0\n", "[rods]\nL = 20.0\nN = 2\ns = 4.0\n")
+assert "N = 2" in TWO_RODS
 
 
 def test_rod_solid_is_a_closed_box_along_the_line() -> None:

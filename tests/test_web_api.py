@@ -305,12 +305,21 @@ def test_cancel_by_another_client_leaves_the_job_running(client: TestClient,
     assert _wait(client, jid, ("done", "cancelled", "failed"))["status"] == "done"
 
 
-def test_shape_of_a_finished_job(client: TestClient) -> None:
-    lines = [{"points": [[-30.0, 6.0], [30.0, 6.0]]}, {"points": [[-20.0, -6.0], [40.0, -6.0]]}]
-    jid = client.post("/api/jobs", json={"lines": lines, "seed": 2}).json()["id"]
-    early = client.get(f"/api/jobs/{jid}/shape")
+TWO_LINES = [{"points": [[-30.0, 6.0], [30.0, 6.0]]}, {"points": [[-20.0, -6.0], [40.0, -6.0]]}]
+
+
+def _finished(client: TestClient, path: str, seed: int) -> str:
+    """A fake job of TWO_LINES run to the end; ``path`` (``{jid}`` in it) answers 404 before."""
+    jid = client.post("/api/jobs", json={"lines": TWO_LINES, "seed": seed}).json()["id"]
+    early = client.get(path.format(jid=jid))
     assert early.status_code == 404 and "no file 'final.vtu'" in early.json()["error"]
     _wait(client, jid, ("done",))
+    return jid
+
+
+def test_shape_of_a_finished_job(client: TestClient) -> None:
+    lines = TWO_LINES
+    jid = _finished(client, "/api/jobs/{jid}/shape", seed=2)
     r = client.get(f"/api/jobs/{jid}/shape")
     assert r.status_code == 200, r.text
     shape = r.json()
@@ -334,11 +343,8 @@ def test_model_of_a_finished_job(client: TestClient, other: TestClient, fmt: str
                                  tmp_path: Path) -> None:
     import trimesh
 
-    lines = [{"points": [[-30.0, 6.0], [30.0, 6.0]]}, {"points": [[-20.0, -6.0], [40.0, -6.0]]}]
-    jid = client.post("/api/jobs", json={"lines": lines, "seed": 1}).json()["id"]
-    early = client.get(f"/api/jobs/{jid}/model.{fmt}")
-    assert early.status_code == 404 and "no file 'final.vtu'" in early.json()["error"]
-    _wait(client, jid, ("done",))
+    lines = TWO_LINES
+    jid = _finished(client, "/api/jobs/{jid}/model." + fmt, seed=1)
     r = client.get(f"/api/jobs/{jid}/model.{fmt}")
     assert r.status_code == 200, r.text
     assert f'filename="undulate-{jid}.{fmt}"' in r.headers["content-disposition"]
