@@ -1,8 +1,10 @@
-"""``undulate design``: what to print for a wanted wave (analytical inverse, docs/design.md)."""
+"""``undulate design`` and ``undulate predict``: what to print for a wanted wave (analytical
+inverse), and what a case gives without simulating it (docs/design.md)."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -110,6 +112,49 @@ def design(
         con.print(t2)
 
 
+def predict(
+    config: Annotated[Path, typer.Argument(help="case description (TOML), as for 'run'")],
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON instead of a table")]
+    = False,
+    source: Annotated[str, typer.Option(
+        "--source", help="auto (simulated data where the case is inside them, else theory), "
+        "simulation (the nearest simulated point even outside) or theory (eq. (1))")]
+    = "auto",
+) -> None:
+    """What 'undulate run CASE' would give, at once: the family and per rod n, l, lam, a, from
+    the simulated results shipped with undulate where the case is inside them, else theory.
+
+    Example: undulate predict examples/single_rod.toml --json
+    """
+    from ..design.predict import SOURCES, predict_case
+    from ..model import ConfigError, load_case
+    from .cli import _fail
+
+    if source not in SOURCES:
+        raise _fail(f"--source: must be one of {', '.join(SOURCES)} (got {source!r})")
+    try:
+        case = load_case(config)
+    except ConfigError as err:
+        line = (str(err).splitlines() or ["invalid case"])[0]
+        raise _fail(line if line.startswith(str(config)) else f"{config}: {line}") from None
+    res = predict_case(case, source)
+    if as_json:
+        typer.echo(json.dumps(res, indent=2))
+        return
+    con = Console()
+    t = Table(title=f"{case.name}: {res['summary']}")
+    for col in ("rod", "n", "l [mm]", "lam [mm]", "a [mm]"):
+        t.add_column(col, justify="right")
+    for r in res["rods"]:
+        t.add_row(str(r["index"]), str(r["n"]), *(f"{r[k]:.4g}" if r[k] is not None else "-"
+                                                  for k in ("l", "lam", "a")))
+    con.print(t)
+    typer.echo(f"family: {res['family']} ({res['source']}, {res['confidence']})")
+    for w in res["warnings"]:
+        typer.echo(f"Warning: {w}", err=True)
+
+
 def register(app: typer.Typer) -> None:
-    """Add the ``design`` command to ``app``."""
+    """Add the ``design`` and ``predict`` commands to ``app``."""
     app.command("design")(design)
+    app.command("predict")(predict)

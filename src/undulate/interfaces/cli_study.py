@@ -408,27 +408,36 @@ def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")
 
 @study_app.command("atlas")
 def atlas_cmd(
-    directory: Annotated[Path, typer.Argument(help="a parallel-phase-diagram study directory")],
+    directory: Annotated[Path, typer.Argument(
+        help="a study directory (parallel-phase-diagram or single-rod-h), or its table.csv")],
     out: Annotated[Path, typer.Option("--out", help="atlas CSV to write")],
 ) -> None:
-    """The phase diagram as an atlas for designs (one row per (h, s): family, n, l, lam, a).
+    """A study's results as an atlas for designs (one row per (h, s): family, n, l, lam, a).
 
-    The package ships the reference one (undulate.design.atlas): remake it with
-    undulate study atlas DIR --out src/undulate/design/data/phase_diagram.csv
+    The package ships two (undulate.design.atlas, undulate predict): remake them with
+    undulate study atlas DIR --out src/undulate/design/data/phase_diagram.csv (the diagram)
+    and undulate study atlas docs/studies/single-rod-h/table.csv --out
+    src/undulate/design/data/single_rod.csv
     """
+    import pandas as pd
+
     from undulate.design.atlas import build_atlas, write_atlas
     from undulate.study.storage import collect, read_study
 
-    if not (directory / "runs").is_dir():
-        _fail(f"{directory}: not a study directory (no runs/)")
-    meta = read_study(directory) or {}
-    if meta.get("name") != "parallel-phase-diagram":
-        _fail(f"{directory}: an atlas is made from a parallel-phase-diagram study (this one is "
-              f"{meta.get('name')!r})")
+    if directory.is_file() and directory.suffix == ".csv":
+        table, setup = pd.read_csv(directory), None
+    elif (directory / "runs").is_dir():
+        meta = read_study(directory) or {}
+        if meta.get("name") not in ("parallel-phase-diagram", "single-rod-h"):
+            _fail(f"{directory}: an atlas is made from a parallel-phase-diagram or "
+                  f"single-rod-h study (this one is {meta.get('name')!r})")
+        table, setup = collect(directory), meta.get("definition", {}).get("setup")
+    else:
+        _fail(f"{directory}: not a study directory (no runs/) nor a table .csv")
     try:
-        atlas = build_atlas(collect(directory), setup=meta.get("definition", {}).get("setup"))
-    except ValueError as err:
-        _fail(str(err))
+        atlas = build_atlas(table, setup=setup)
+    except (ValueError, KeyError) as err:
+        _fail(f"{directory}: {err}")
     path = write_atlas(atlas, out)
     _out.print(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs",
                highlight=False, soft_wrap=True)

@@ -1,0 +1,61 @@
+"""undulate predict: simulated results where the case is inside the shipped atlases, theory
+(with a warning saying why) elsewhere; JSON with a family and one entry per rod."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from undulate.design.atlas import load_atlas
+from undulate.design.predict import SINGLE_ROD_FILE, arch_rise, predict_case
+from undulate.interfaces.cli import app
+from undulate.model import case_from_dict
+
+
+def _case(**rods) -> object:
+    return case_from_dict({"rods": {"E_B": 1000.0, **rods}})
+
+
+def test_inside_the_single_rod_atlas_gives_the_simulated_point() -> None:
+    atlas = load_atlas(SINGLE_ROD_FILE)
+    row = atlas.points.iloc[(atlas.points["h"] - 0.2).abs().argmin()]
+    res = predict_case(_case(h=0.2))
+    assert res["source"] == "simulation" and res["warnings"] == []
+    assert len(res["rods"]) == 1 and res["rods"][0]["n"] == row["n"]
+    assert res["rods"][0]["l"] == pytest.approx(row["l"]) and res["family"] == row["family"]
+
+
+def test_outside_falls_back_to_theory_and_says_why() -> None:
+    res = predict_case(_case(h=0.2, E_B=3000.0))
+    assert res["source"] == "theory" and "E_B = 3000" in res["warnings"][0]
+    near = predict_case(_case(h=0.2, E_B=3000.0), "simulation")
+    assert near["source"] == "simulation" and near["confidence"] == "outside"
+    assert "the nearest point" in near["warnings"][0]
+    five = predict_case(_case(h=0.3, N=5, s=10.0), "theory")
+    assert five["source"] == "theory" and len(five["rods"]) == 5
+    with pytest.raises(ValueError, match="source: must be one of"):
+        predict_case(_case(h=0.2), "oracle")
+
+
+def test_one_arch_rise_is_the_circular_arc_on_the_relaxed_chord() -> None:
+    a = arch_rise(100.0, 0.5)
+    # a circular arc of 100 mm on a 66.7 mm chord: check by rebuilding the chord
+    x = 1.49578  # half its turning angle, sin(x) / x = 2 / 3
+    assert math.sin(x) / x == pytest.approx(2 / 3, abs=1e-4)
+    assert a == pytest.approx(100 / (2 * x) * (1 - math.cos(x)), rel=1e-3)
+    res = predict_case(case_from_dict({"rods": {"h": 2.0, "L": 60.0}}), "theory")
+    assert res["rods"][0]["n"] == 1 and res["rods"][0]["a"] == pytest.approx(arch_rise(60, 0.5))
+
+
+def test_cli_json(tmp_path: Path) -> None:
+    (tmp_path / "c.toml").write_text("[rods]\nh = 0.2\nE_B = 1000.0\n")
+    res = CliRunner().invoke(app, ["predict", str(tmp_path / "c.toml"), "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert out["source"] == "simulation" and out["rods"][0]["n"] >= 3
+    bad = CliRunner().invoke(app, ["predict", str(tmp_path / "c.toml"), "--source", "x"])
+    assert bad.exit_code == 2 and "--source: must be one of" in bad.stderr
