@@ -429,6 +429,14 @@ CASES: list[ErrorCase] = [
     ErrorCase("design-phase", "Inverse design (`undulate design`)", "`--phase wavy --N 5`",
               lambda d: ["design", "--target", "l=20", "--N", "5", "--phase", "wavy"],
               ("phase: must be one of coherent, independent",)),
+    # ---- predict ------------------------------------------------------------------------
+    ErrorCase("predict-source", "Predictions (`undulate predict`)", "`--source oracle`",
+              lambda d: (d / "c.toml").write_text("[rods]\nh = 0.2\n")
+              and ["predict", "c.toml", "--source", "oracle"],
+              ("--source: must be one of auto, simulation, theory",)),
+    ErrorCase("predict-case", "Predictions (`undulate predict`)", "a bad value in the case",
+              lambda d: (d / "c.toml").write_text("[rods]\nh = -1\n")
+              and ["predict", "c.toml"], ("c.toml", "h")),
     # ---- theory -------------------------------------------------------------------------
     ErrorCase("theory-eps0", "Analytical model (`undulate theory`): the case file's ranges",
               "`--eps0 50`", lambda d: ["theory", "--eps0", "50"],

@@ -140,7 +140,7 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         page.wait_for_function("document.querySelectorAll('#atlas circle.outside').length == 1")
         assert page.locator("#atlas rect").count() > 10
         assert "outside the simulated diagram (N = 3" in page.locator("#atlas-where").inner_text()
-        pm = T.phase_map(0.3, 10.0, eps0=0.5, L=40.0, N=3)
+        pm = T.phase_map(0.3, 10.0, eps0=0.5, L=40.0, N=3, E_B=1000.0)  # the page's E_B
         assert int(cells.nth(3).inner_text()) == int(pm["n"].item())
         fam = str(pm["family"].item())
         assert cells.nth(6).inner_text() == fam
