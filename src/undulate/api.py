@@ -265,7 +265,7 @@ def _write_outputs(result: SimResult, ana: dict[str, Any], out: Path, artifacts:
             plot_fits(cl, r, out / f"rod_{k}_fits.png", title=f"rod {k}")
 def _merge_rod_metrics(out: Path, ana: dict[str, Any]) -> None:
     """Put the per-rod analysis keys into metrics.json's ``rods`` entries."""
-    from .study.storage import atomic_write_json, jsonable
+    from .fileio import atomic_write_json, jsonable
 
     p = out / "metrics.json"
     m = json.loads(p.read_text())

@@ -1,15 +1,19 @@
 """Small file helpers shared by every stage (no third-party imports, so the engine can use
-them without loading the study stage): atomic replacement of a file and default modes."""
+them without loading the study stage): atomic replacement of a file, atomic JSON, JSON
+conversion of numpy values, and default modes."""
 
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_path", "current_umask", "default_mode"]
+__all__ = ["atomic_path", "atomic_write_json", "current_umask", "default_mode", "jsonable"]
 
 
 def current_umask() -> int:
@@ -60,3 +64,30 @@ def atomic_path(path: Path) -> Iterator[str]:
             os.close(dfd)
     except OSError:
         pass
+
+
+def jsonable(obj: Any) -> Any:
+    """Convert numpy scalars/arrays, paths and tuples to JSON types; NaN/inf become None."""
+    if obj is None or isinstance(obj, bool | str | int):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | set):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    tolist = getattr(obj, "tolist", None)  # numpy scalars and arrays
+    if callable(tolist):
+        return jsonable(tolist())
+    raise TypeError(f"value of type {type(obj).__name__} is not JSON-serialisable")
+
+
+def atomic_write_json(path: Path, data: Any) -> None:
+    """Write JSON to ``path`` atomically (tmp file in the same directory, fsync, os.replace)."""
+    text = json.dumps(data, indent=1, sort_keys=False, allow_nan=False)
+    with atomic_path(path) as tmp, open(tmp, "w") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())

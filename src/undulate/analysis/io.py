@@ -137,7 +137,7 @@ def analyse_dir(path: str | Path, *, plots: bool = True) -> dict[str, Any]:
     merged ``metrics.json`` and, if ``plots``, ``rod_<k>_fits.png``. Returns the
     :func:`analyse_run` dict plus ``"figures"`` (paths as strings).
     """
-    from ..study.storage import atomic_write_json, jsonable
+    from ..fileio import atomic_write_json, jsonable
 
     d = Path(path)
     if not d.is_dir():

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..study.storage import atomic_write_json, default_mode, jsonable
+from ..fileio import atomic_write_json, default_mode, jsonable
 
 __all__ = [
     "write_result",

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +26,13 @@ from typing import Any
 
 import pandas as pd
 
-from ..fileio import atomic_path, current_umask, default_mode  # noqa: F401 (re-exported)
+from ..fileio import (  # noqa: F401 (re-exported)
+    atomic_path,
+    atomic_write_json,
+    current_umask,
+    default_mode,
+    jsonable,
+)
 from ..model.config import MATERIAL_DEFAULTS, Fabric, MeshOptions
 from .spec import get_path
 
@@ -71,33 +76,6 @@ PARAM_ALIASES: dict[str, tuple[str, Any]] = {
     "dx_rod": ("mesh.dx_rod", MeshOptions.model_fields["dx_rod"].default),
     "dx_far": ("mesh.dx_far", MeshOptions.model_fields["dx_far"].default),
 }
-
-
-def jsonable(obj: Any) -> Any:
-    """Convert numpy scalars/arrays, paths and tuples to JSON types; NaN/inf become None."""
-    if obj is None or isinstance(obj, bool | str | int):
-        return obj
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple | set):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, os.PathLike):
-        return os.fspath(obj)
-    tolist = getattr(obj, "tolist", None)  # numpy scalars and arrays
-    if callable(tolist):
-        return jsonable(tolist())
-    raise TypeError(f"value of type {type(obj).__name__} is not JSON-serialisable")
-
-
-def atomic_write_json(path: Path, data: Any) -> None:
-    """Write JSON to ``path`` atomically (tmp file in the same directory, fsync, os.replace)."""
-    text = json.dumps(data, indent=1, sort_keys=False, allow_nan=False)
-    with atomic_path(path) as tmp, open(tmp, "w") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
 
 
 def write_record(study_dir: Path, record: dict[str, Any]) -> Path:
