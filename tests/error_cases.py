@@ -259,6 +259,10 @@ CASES: list[ErrorCase] = [
               "`UNDULATE_PARDISO_THREADS=0`", lambda d: ["theory", "--h", "0.3"],
               ("UNDULATE_PARDISO_THREADS", "from 1 to 256"),
               env=(("UNDULATE_PARDISO_THREADS", "0"),)),
+    ErrorCase("jax-cache-mb", "Environment settings (any command)",
+              "`UNDULATE_JAX_CACHE_MB=lots`", lambda d: ["cache"],
+              ("UNDULATE_JAX_CACHE_MB", "from 10 to 1000000", "'lots'"),
+              env=(("UNDULATE_JAX_CACHE_MB", "lots"),)),
     # ---- patterns -----------------------------------------------------------------------
     ErrorCase("knit-half", "Case file (`undulate run CASE --out DIR`)",
               "`fabric.E_y` without `fabric.G`", _case_file('[fabric]\nE_y = 0.2\n'),

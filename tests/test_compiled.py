@@ -113,8 +113,7 @@ def test_cache_is_pruned_least_recently_used_first(tmp_path, monkeypatch) -> Non
         p.write_bytes(b"x" * 2**20)
         os.utime(p, (1000.0 + k, 1000.0 + k))
     assert compiled.cache_usage() == (6, 6 * 2**20)
-    monkeypatch.setenv("UNDULATE_JAX_CACHE_MB", "3.5")
-    assert compiled.prune_cache() == 3 * 2**20
+    assert compiled.prune_cache(limit=int(3.5 * 2**20)) == 3 * 2**20
     left = sorted(p.name for d in ("exe", "export") for p in (tmp_path / d).iterdir())
     assert left == ["kernel3", "kernel4", "kernel5"]
     assert compiled.clear_cache() == (3, 3 * 2**20)
@@ -142,3 +141,25 @@ def test_cold_start_is_announced_until_the_kernels_are_kept(tmp_path, monkeypatc
     res = CliRunner().invoke(app, ["cache", "--clear"])
     assert res.exit_code == 0 and "removed" in res.stdout
     assert not list((tmp_path / "warm").iterdir())
+
+
+def test_a_cold_run_says_so_once_its_output_folder_is_accepted(tmp_path, monkeypatch) -> None:
+    from error_cases import TINY
+    from typer.testing import CliRunner
+
+    import undulate.api
+    from undulate.interfaces.cli import app
+    from undulate.solve import ConvergenceError
+
+    def stop(*a, **k):
+        raise ConvergenceError("stopped by the test", step=0, residual=1.0)
+
+    monkeypatch.setattr(undulate.api, "simulate", stop)
+    monkeypatch.setenv("UNDULATE_JAX_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "tiny.toml").write_text(TINY)
+    run = ["run", str(tmp_path / "tiny.toml"), "--out"]
+    res = CliRunner().invoke(app, [*run, str(tmp_path / "r1")])
+    assert res.exit_code == 3 and "compiling kernels once" in res.stdout, res.output
+    (tmp_path / "file").write_text("x")  # a refused folder: its error is the only output
+    res = CliRunner().invoke(app, [*run, str(tmp_path / "file")])
+    assert res.exit_code == 2 and "compiling" not in res.output

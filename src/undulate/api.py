@@ -154,7 +154,7 @@ writing); release steps themselves are reported through ``progress(fraction, rec
 
 def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool = True,
              progress: ProgressFn | None = None, *, overwrite: bool = False,
-             stage: StageFn | None = None) -> dict[str, Any]:
+             stage: StageFn | None = None, note: StageFn | None = None) -> dict[str, Any]:
     """Simulate and analyse one case; write its files into ``out`` (if given).
 
     Returns a flat, JSON-serialisable record (solver statistics and mean metrics) used by the
@@ -166,6 +166,9 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
     beside it, which is renamed to ``out`` only when every file is complete. An interrupted
     run leaves no ``out`` (or the previous one, untouched). With ``overwrite``, a previous
     run's files in ``out`` are replaced (anything else there is refused).
+
+    ``note(text)``: called, once ``out`` is accepted, with a line worth keeping on the screen
+    (the first run of this undulate version on the machine: that it compiles its kernels).
     """
     from .interfaces.output import StagedDir
 
@@ -177,7 +180,9 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
     try:
         if stage is not None:
             stage("set-up: mesh, pre-stretch, printing")
-        cold = cold_start_notice() is not None
+        notice = cold_start_notice()
+        if notice is not None and note is not None:
+            note(notice)
         t0 = time.perf_counter()
         first_step: list[float] = []
 
@@ -188,7 +193,7 @@ def run_case(case: Case | dict, out: str | Path | None = None, artifacts: bool =
                 progress(frac, rec)
 
         result = simulate(case, timed)
-        if cold:
+        if notice is not None:
             mark_warm(first_step[0] if first_step else time.perf_counter() - t0)
         return _record_and_write(result, staged, artifacts, stage)
     finally:

@@ -42,11 +42,13 @@ def _fail(msg: str, code: int = 2) -> typer.Exit:
 @app.callback()
 def _settings() -> None:
     """Check the environment settings before any command runs (one line if one is bad)."""
+    from ..mechanics.compiled import cache_limit_mb
     from ..solve.linear import SettingError, pardiso_threads
 
     try:
         pardiso_threads()
-    except SettingError as err:
+        cache_limit_mb()
+    except (SettingError, ValueError) as err:
         raise _fail(str(err)) from None
 
 
@@ -85,6 +87,13 @@ class _Reporter:
         if self._prog is not None:
             self._prog.stop()
 
+    def note(self, text: str) -> None:
+        """A line that stays (above the bar on a terminal)."""
+        if self._prog is not None:
+            self._prog.console.print(escape(text))
+        else:
+            print(text, flush=True)
+
     def stage(self, text: str) -> None:
         if self._prog is not None:
             self._prog.update(self._task, description=escape(text))
@@ -101,16 +110,11 @@ class _Reporter:
 
 def _simulate_and_report(case, out: Path, overwrite: bool) -> None:
     from .. import api
-    from ..mechanics.compiled import cold_start_notice
-
-    notice = cold_start_notice()
-    if notice:  # before the bar, so that it stays on the screen (and in a log)
-        typer.echo(notice, err=True)
     try:
         # the destination is checked (and its staging folder made) before anything runs
         with _Reporter(case) as rep:
             rec = api.run_case(case, out, progress=rep.progress, stage=rep.stage,
-                               overwrite=overwrite)
+                               overwrite=overwrite, note=rep.note)
     except api.OutputError as err:
         raise _fail(str(err)) from None
     except api.ConvergenceError as err:
@@ -196,7 +200,7 @@ def cache(
     Location: ~/.cache/undulate/jax, or UNDULATE_JAX_CACHE_DIR (UNDULATE_JAX_CACHE=0: no
     cache). It is pruned to UNDULATE_JAX_CACHE_MB (default 150 MB), least recently used first.
     """
-    from ..mechanics.compiled import _limit_bytes, cache_root, cache_usage, clear_cache
+    from ..mechanics.compiled import cache_limit_mb, cache_root, cache_usage, clear_cache
 
     root = cache_root()
     if root is None:
@@ -208,7 +212,7 @@ def cache(
         return
     n, size = cache_usage(root)
     typer.echo(f"kernel cache: {root}: {n} files, {size / 2**20:.1f} MB (kept under "
-               f"{_limit_bytes() / 2**20:.0f} MB, UNDULATE_JAX_CACHE_MB)")
+               f"{cache_limit_mb():g} MB, UNDULATE_JAX_CACHE_MB)")
 
 
 def _register_subcommands() -> None:

@@ -58,8 +58,8 @@ import numpy as np
 
 from ..fileio import atomic_path
 
-__all__ = ["CachedJit", "cache_root", "cache_usage", "clear_cache", "prune_cache",
-           "cold_start_notice", "mark_warm", "DEFAULT_LIMIT_MB"]
+__all__ = ["CachedJit", "cache_root", "cache_usage", "cache_limit_mb", "clear_cache",
+           "prune_cache", "cold_start_notice", "mark_warm", "DEFAULT_LIMIT_MB"]
 
 #: the cache is pruned to this many MB unless ``UNDULATE_JAX_CACHE_MB`` says otherwise
 DEFAULT_LIMIT_MB = 150
@@ -105,13 +105,24 @@ def clear_cache(root: Path | None = None) -> tuple[int, int]:
     return n, size
 
 
-def _limit_bytes() -> int:
-    raw = os.environ.get("UNDULATE_JAX_CACHE_MB", "")
+def cache_limit_mb() -> float:
+    """The cache's size limit in MB: ``UNDULATE_JAX_CACHE_MB`` (a number from 10 to 1e6),
+    else :data:`DEFAULT_LIMIT_MB`; anything else raises ValueError naming the variable."""
+    raw = os.environ.get("UNDULATE_JAX_CACHE_MB", "").strip()
+    if not raw:
+        return float(DEFAULT_LIMIT_MB)
     try:
-        mb = float(raw) if raw else float(DEFAULT_LIMIT_MB)
+        mb = float(raw)
     except ValueError:
-        mb = float(DEFAULT_LIMIT_MB)
-    return int(max(mb, 0.0) * 2**20)
+        mb = float("nan")
+    if not 10.0 <= mb <= 1e6:  # also NaN
+        raise ValueError(f"UNDULATE_JAX_CACHE_MB: must be a number of MB from 10 to 1000000 "
+                         f"(got {raw!r})")
+    return mb
+
+
+def _limit_bytes() -> int:
+    return int(cache_limit_mb() * 2**20)
 
 
 def prune_cache(root: Path | None = None, limit: int | None = None) -> int:
