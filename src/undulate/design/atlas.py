@@ -13,6 +13,7 @@ L, eps0 and moduli; h and s within the swept ranges). Units: mm, MPa.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import dataclass
@@ -22,7 +23,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-__all__ = ["ATLAS_FILE", "Atlas", "Location", "build_atlas", "load_atlas", "locate"]
+__all__ = ["ATLAS_FILE", "Atlas", "Location", "build_atlas", "load_atlas", "locate",
+           "shipped_atlas"]
 
 #: the reference phase diagram shipped in the package
 ATLAS_FILE = Path(__file__).with_name("data") / "phase_diagram.csv"
@@ -152,6 +154,12 @@ def load_atlas(path: str | Path | None = None) -> Atlas:
         meta = json.loads(first[2:])
         points = pd.read_csv(f)
     return Atlas(points, meta)
+
+
+@functools.cache
+def shipped_atlas(path: Path = ATLAS_FILE) -> Atlas:
+    """A shipped atlas, read once per process (the web page asks on every prediction)."""
+    return load_atlas(path)
 
 
 def _bracket(values: pd.Series, v: float) -> list[float]:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import theory as T
-from .atlas import Atlas, load_atlas, locate
+from .atlas import ATLAS_FILE, Atlas, locate, shipped_atlas
 
 __all__ = ["SINGLE_ROD_FILE", "predict_case"]
 
@@ -28,9 +28,9 @@ SOURCES = ("auto", "simulation", "theory")
 
 def _atlases() -> list[Atlas]:
     out = []
-    for path in (SINGLE_ROD_FILE, None):
+    for path in (SINGLE_ROD_FILE, ATLAS_FILE):
         try:
-            out.append(load_atlas(path))
+            out.append(shipped_atlas(path))
         except (OSError, ValueError):
             continue
     return out
@@ -79,7 +79,7 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
     warnings: list[str] = []
     if case.pattern is not None:
         warnings.append("a pattern of lines: the simulated data cover parallel straight rods "
-                        "only; theory for one straight rod of the pattern's first line")
+                        "only; theory for the case's [rods] values")
         source = "theory"
     best = None
     if source != "theory":

@@ -250,9 +250,9 @@ def _validation_line(err: RequestValidationError) -> str:
 
 def _locate_groups(out: dict[str, Any], p: Params) -> None:
     """Each group of parallel lines placed on the simulated phase diagram (``atlas``)."""
-    from ...design.atlas import load_atlas, locate
+    from ...design.atlas import locate, shipped_atlas
 
-    atlas = load_atlas()
+    atlas = shipped_atlas()
     by_id = {r["id"]: r for r in out["lines"]}
     for g in out["groups"]:
         members = [by_id[i] for i in g["lines"]]
@@ -335,9 +335,9 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
     @app.get("/api/atlas")
     def atlas() -> dict[str, Any]:
         """The simulated phase diagram shipped with undulate (undulate.design.atlas)."""
-        from ...design.atlas import load_atlas
+        from ...design.atlas import shipped_atlas
 
-        return load_atlas().to_dict()
+        return shipped_atlas().to_dict()
 
     @app.post("/api/pattern/svg")
     def pattern_svg(body: SvgIn) -> dict[str, Any]:
