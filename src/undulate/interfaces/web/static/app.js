@@ -75,23 +75,17 @@ function setLines(newLines) {
   schedulePredict();
 }
 
-function undo() {
-  if (!past.length) return;
-  future.push(lines);
-  lines = past.pop();
+function travel(from, to) {  // one step back (undo) or forward (redo) in the history
+  if (!from.length) return;
+  to.push(lines);
+  lines = from.pop();
   if (!lines.some((l) => l.id === selected)) selected = null;
   draw();
   schedulePredict();
 }
 
-function redo() {
-  if (!future.length) return;
-  past.push(lines);
-  lines = future.pop();
-  if (!lines.some((l) => l.id === selected)) selected = null;
-  draw();
-  schedulePredict();
-}
+function undo() { travel(past, future); }
+function redo() { travel(future, past); }
 
 function deleteSelected() {
   if (selected === null) return;
