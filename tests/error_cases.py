@@ -322,15 +322,19 @@ CASES: list[ErrorCase] = [
               "a spline through a repeated point",
               _case_file('[[pattern.lines]]\nspline = [[0, 0], [10, 5], [10, 5], [30, 0]]\n'),
               ("pattern.lines.0.spline: points 1 and 2 coincide",)),
+    ErrorCase("pattern-families-renamed", _PAT,
+              "the old name `[[pattern.families]]`",
+              _case_file('[[pattern.families]]\nlength = 40.0\ncount = 1\n'),
+              ("pattern.families: renamed arrays: write [[pattern.arrays]]",)),
     ErrorCase("pattern-family", _PAT,
-              "a family with both `gaps` and `count`",
-              _case_file('[[pattern.families]]\nlength = 40.0\ncount = 3\nspacing = 4.0\n'
+              "an array with both `gaps` and `count`",
+              _case_file('[[pattern.arrays]]\nlength = 40.0\ncount = 3\nspacing = 4.0\n'
                          'gaps = [4.0, 6.0]\n'),
-              ("pattern.families.0.gaps: give either gaps or count and spacing",)),
+              ("pattern.arrays.0.gaps: give either gaps or count and spacing",)),
     ErrorCase("pattern-family-lengths", _PAT,
-              "a family with a length list of the wrong size",
-              _case_file('[[pattern.families]]\nlength = [40.0, 30.0]\ngaps = [4.0, 6.0]\n'),
-              ("pattern.families.0.length: 2 lengths for 3 lines",)),
+              "an array with a length list of the wrong size",
+              _case_file('[[pattern.arrays]]\nlength = [40.0, 30.0]\ngaps = [4.0, 6.0]\n'),
+              ("pattern.arrays.0.length: 2 lengths for 3 lines",)),
     ErrorCase("pattern-outside", _PAT,
               "a line outside the fabric (`fabric.size`)",
               _case_file('[fabric]\nsize = [100.0, 60.0]\n[[pattern.lines]]\nid = "a"\n'
@@ -430,9 +434,9 @@ CASES: list[ErrorCase] = [
               "two targets, eps0 not free", lambda d: ["design", "--target", "l=20",
                                                        "--target", "a=5"],
               ("two targets need eps0 free", "--eps0-min")),
-    ErrorCase("design-phase", "Inverse design (`undulate design`)", "`--phase wavy --N 5`",
-              lambda d: ["design", "--target", "l=20", "--N", "5", "--phase", "wavy"],
-              ("phase: must be one of coherent, independent",)),
+    ErrorCase("design-family", "Inverse design (`undulate design`)", "`--family wavy --N 5`",
+              lambda d: ["design", "--target", "l=20", "--N", "5", "--family", "wavy"],
+              ("family: must be one of coherent, independent",)),
     # ---- predict ------------------------------------------------------------------------
     ErrorCase("predict-source", "Predictions (`undulate predict`)", "`--source oracle`",
               lambda d: (d / "c.toml").write_text("[rods]\nh = 0.2\n")

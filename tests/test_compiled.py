@@ -147,14 +147,14 @@ def test_a_cold_run_says_so_once_its_output_folder_is_accepted(tmp_path, monkeyp
     from error_cases import TINY
     from typer.testing import CliRunner
 
-    import undulate.api
+    import undulate.pipeline.run
     from undulate.interfaces.cli import app
     from undulate.solve import ConvergenceError
 
     def stop(*a, **k):
         raise ConvergenceError("stopped by the test", step=0, residual=1.0)
 
-    monkeypatch.setattr(undulate.api, "simulate", stop)
+    monkeypatch.setattr(undulate.pipeline.run, "simulate", stop)
     monkeypatch.setenv("UNDULATE_JAX_CACHE_DIR", str(tmp_path / "cache"))
     (tmp_path / "tiny.toml").write_text(TINY)
     run = ["run", str(tmp_path / "tiny.toml"), "--out"]

@@ -56,11 +56,11 @@ def test_n_is_met_at_the_middle_of_its_plateau_and_rounding_is_reported():
 
 def test_bundled_group_needs_thinner_rods_than_a_lone_rod():
     lone = inverse({"l": 20.0}, Constraints(L=1e4, **FINE))
-    group = inverse({"l": 20.0}, Constraints(L=1e4, N=5, phase="coherent", **FINE))
+    group = inverse({"l": 20.0}, Constraints(L=1e4, N=5, family="coherent", **FINE))
     assert group.h_exact < lone.h_exact
     assert group.s == pytest.approx(0.5 * group.predicted_exact["s_hat"])
     assert group.predicted_exact["l"] == pytest.approx(20.0)
-    indep = inverse({"l": 20.0}, Constraints(L=1e4, N=5, phase="independent", **FINE))
+    indep = inverse({"l": 20.0}, Constraints(L=1e4, N=5, family="independent", **FINE))
     assert indep.h_exact == pytest.approx(lone.h_exact)  # s > s_hat: the rods act alone
     assert indep.predicted["family"] == "independent"
 
@@ -79,8 +79,8 @@ def test_sensitivity_brackets_the_prediction():
     ({"l": 20.0, "a": 50.0}, {"eps0_min": 0.2, "eps0_max": 1.0}, "no eps0 in"),
     ({}, {}, "at least one"),
     ({"l": 20.0}, {"h_max": 0.01}, "h_max"),
-    ({"l": 20.0}, {"phase": "coherent"}, "needs N >= 2"),
-    ({"l": 20.0}, {"N": 5, "phase": "independent", "s_max": 5.0}, "outside [s_min, s_max]"),
+    ({"l": 20.0}, {"family": "coherent"}, "needs N >= 2"),
+    ({"l": 20.0}, {"N": 5, "family": "independent", "s_max": 5.0}, "outside [s_min, s_max]"),
 ])
 def test_bad_requests_raise_one_clear_error(targets, kw, frag):
     with pytest.raises(DesignError, match=None) as err:

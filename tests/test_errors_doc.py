@@ -22,9 +22,9 @@ def _no_simulation(*args, **kwargs):
 
 def run_case(case: ErrorCase, workdir: Path,
              monkeypatch: pytest.MonkeyPatch) -> tuple[int, str, list[str]]:
-    import undulate.api
+    import undulate.pipeline.run
 
-    monkeypatch.setattr(undulate.api, "simulate", _no_simulation)
+    monkeypatch.setattr(undulate.pipeline.run, "simulate", _no_simulation)
     monkeypatch.chdir(workdir)
     args = case.setup(workdir)
     res = CliRunner().invoke(app, args, env={"COLUMNS": "200", **dict(case.env)})

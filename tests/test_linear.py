@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from undulate.solve import linear
+from undulate.solve import linear, pardiso
 from undulate.solve.linear import (
     AutoSolver,
     LDLSolver,
@@ -228,7 +228,7 @@ def test_pardiso_threads_are_fixed_and_reproducible():
 
     get = PyPardisoSolver().libmkl.MKL_Domain_Get_Max_Threads
     get.restype = ctypes.c_int
-    assert get(linear._MKL_DOMAIN_PARDISO) == linear.pardiso_threads()
+    assert get(pardiso._MKL_DOMAIN_PARDISO) == linear.pardiso_threads()
     # an indefinite 2D Laplacian-like matrix, large enough to be factored in parallel
     m = 140
     T = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))

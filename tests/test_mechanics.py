@@ -122,8 +122,8 @@ def test_hinge_kernels_match_autodiff_of_the_energy():
     import jax
     import jax.numpy as jnp
 
-    from undulate.mechanics.assemble import kernels_for
     from undulate.mechanics.fabric import hinge_bending
+    from undulate.mechanics.forms import kernels_for
 
     rng = np.random.default_rng(3)
     base = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]])
@@ -147,8 +147,8 @@ def test_membrane_kernels_match_autodiff_of_the_energy():
     import jax
     import jax.numpy as jnp
 
-    from undulate.mechanics.assemble import kernels_for
     from undulate.mechanics.fabric import neo_hookean_membrane
+    from undulate.mechanics.forms import kernels_for
 
     rng = np.random.default_rng(5)
     n = 64

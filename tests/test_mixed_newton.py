@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from undulate.mechanics.assemble import kernels_for, strain_form
+from undulate.mechanics.forms import kernels_for, strain_form
 from undulate.mechanics.rod import rod_bend_twist, rod_footprint, rod_stretch
 
 

@@ -29,7 +29,7 @@ faulthandler.register(signal.SIGUSR1, all_threads=True)
 # Ctrl-C as in a terminal, also when this test runs in a background job (which starts its
 # children with SIGINT ignored: the run then slept through the signal, measured)
 signal.signal(signal.SIGINT, signal.default_int_handler)
-import undulate.interfaces.output as o
+import undulate.pipeline.output as o
 real = o._write_vtu
 def pause(*a, **k):
     print("WRITING", flush=True)
@@ -100,7 +100,7 @@ def test_study_artifacts_are_atomic(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     stale ones of an earlier attempt are gone)."""
     import tomllib
 
-    import undulate.interfaces.output as o
+    import undulate.pipeline.output as o
     from undulate.study.runner import execute_run
 
     def crash(*a, **k):
@@ -214,7 +214,7 @@ def test_staging_folders_of_killed_runs_are_removed(tmp_path: Path) -> None:
     """A run killed with SIGKILL cannot remove its hidden staging folder; the next run into
     the same place removes it when its writer (this host, that process id) is gone, and
     leaves those of live processes alone."""
-    from undulate.interfaces.output import _HOST, INCOMPLETE_TAG, StagedDir
+    from undulate.fileio import _HOST, INCOMPLETE_TAG, StagedDir
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

@@ -134,17 +134,17 @@ def test_predict_lines_groups_by_relaxation_distance() -> None:
     out = predict_lines(lines, h=0.3, eps0=0.5)
     assert [g["N"] for g in out["groups"]] in ([2, 1], [1, 2])
     fams = {ln["id"]: ln["family"] for ln in out["lines"]}
-    assert fams["0"] == fams["1"] == "coherent" and fams["2"] == "single"
+    assert fams["0"] == fams["1"] == "coherent" and fams["2"] == "waves"
 
 
-def test_toml_splines_and_families() -> None:
-    """A spline passes through its points, sampled no coarser than the resolution; a family
+def test_toml_splines_and_arrays() -> None:
+    """A spline passes through its points, sampled no coarser than the resolution; an array
     lays parallel lines at the given (graded) spacing across its direction."""
     from undulate.model import case_from_dict
 
     through = [[-30.0, 0.0], [-10.0, 8.0], [10.0, -8.0], [30.0, 0.0]]
     case = case_from_dict({"pattern": {"resolution": 0.4, "lines": [
-        {"id": "s", "spline": through}], "families": [
+        {"id": "s", "spline": through}], "arrays": [
         {"id": "f", "centre": [0.0, 30.0], "angle": 90.0, "length": [20.0, 30.0, 40.0],
          "gaps": [3.0, 7.0]},
         {"centre": [0.0, -40.0], "length": 50.0, "count": 3, "spacing": 4.0}]}})

@@ -61,7 +61,7 @@ def test_run_in_process_records_ok_and_failed(tmp_path: Path) -> None:
     assert good["engine"] == engine_id() and len(good["engine"]) == 12
     assert bad["engine"] == good["engine"] and good["cpus"] >= 1
     # a failure of the label itself never fails a run (execute_run never raises)
-    import undulate.study.runner as R
+    import undulate.study.execute as R
 
     R.engine_id.cache_clear()
     real = R.ENGINE_PARTS
@@ -299,10 +299,10 @@ def test_workers_are_replaced_and_one_worker_still_isolates(tmp_path: Path, monk
     that had compiled kernels for many sheets died in LLVM, out of memory)."""
     import os
 
-    from undulate.study import runner
+    from undulate.study import workers
     from undulate.study.spec import coarse_first
 
-    monkeypatch.setattr(runner, "RUNS_PER_WORKER", 2)
+    monkeypatch.setattr(workers, "RUNS_PER_WORKER", 2)
     study = _small_study([0.2, 0.3, 0.4, 0.6, 0.7])
     run_study(study, tmp_path / "a", run_fn="_study_fakes:pid_run", workers=1,
               progress=False, artifacts=False)

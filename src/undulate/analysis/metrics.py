@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..model.families import COHERENT_THRESHOLD, FAMILIES, decide_family
 from .fit import ArcChainFit, fit_arcs, fit_sine, prepare
 
 __all__ = [
@@ -64,10 +65,6 @@ NOISY_R2 = 0.95
 """Quality "noisy": the arc-chain fit explains less than this fraction of the z variance."""
 END_DOMINATED_FRACTION = 0.25
 """Quality "end_dominated": straight end pieces cover more than this fraction of the rod."""
-COHERENT_THRESHOLD = 0.5
-"""A multi-rod run is "coherent" when the median neighbour coherence is at least this."""
-FAMILIES: tuple[str, ...] = ("coherent", "independent", "rolls", "bends", "waves", "flat")
-"""Values of ``family`` returned by :func:`classify` / :func:`analyse_run`."""
 
 
 def _f(v: Any) -> float | None:
@@ -229,21 +226,19 @@ def coherence(xyz_a: ArrayLike, xyz_b: ArrayLike, *, n_grid: int = 512) -> float
 
 
 def _family(rods: list[dict[str, Any]], coh: list[float]) -> str:
-    """Family from per-rod metrics and neighbour coherences (rules: :func:`classify`)."""
+    """Family from per-rod metrics and neighbour coherences (the rule:
+    :func:`undulate.model.families.decide_family`)."""
     live = [i for i, r in enumerate(rods) if r["n"] > 0]
     if not live:
-        return "flat"
+        return decide_family(0)
     ones = [rods[i] for i in live if rods[i]["n"] == 1]
     if 2 * len(ones) >= len(live):
-        lam = float(np.median([r["lam"] for r in ones]))
-        a = float(np.median([r["a"] for r in ones]))
-        return "rolls" if lam < 2.0 * a else "bends"
-    if len(rods) == 1:
-        return "waves"
+        return decide_family(1, lam=float(np.median([r["lam"] for r in ones])),
+                             a=float(np.median([r["a"] for r in ones])))
     pairs = [c for k, c in enumerate(coh) if rods[k]["n"] > 0 and rods[k + 1]["n"] > 0]
-    if not pairs:
-        return "waves"
-    return "coherent" if float(np.median(pairs)) >= COHERENT_THRESHOLD else "independent"
+    coherent = (float(np.median(pairs)) >= COHERENT_THRESHOLD
+                if len(rods) > 1 and pairs else None)
+    return decide_family(2, coherent=coherent)
 
 
 def classify(rods_xyz: list[ArrayLike], *, L: float | None = None) -> str:

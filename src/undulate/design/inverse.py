@@ -1,4 +1,4 @@
-"""The analytical inverse: targets (l, lam, a, n, phase) -> printable h, s, eps0.
+"""The analytical inverse: targets (l, lam, a, n, family) -> printable h, s, eps0.
 
 The forward model is that of :mod:`undulate.theory`, with one relation added for the
 wavelength:
@@ -14,7 +14,7 @@ wavelength:
   rise (:func:`undulate.theory.single_arc`).
 
 Unknowns: ``h`` always; ``eps0`` when a range is allowed (two targets fix it); the gap ``s``
-of a group of rods from the wanted phase (coherent: half of s_hat, the middle of the band
+of a group of rods from the wanted family (coherent: half of s_hat, the middle of the band
 where the model has the rods coupled; independent: 1.5 s_hat) unless it is given. The
 thickness found is rounded to the printer's step and the metrics are given again for the
 rounded value, with how far they move for the printer's thickness tolerance.
@@ -42,8 +42,9 @@ TARGET_KEYS: dict[str, str] = {
     "a": "amplitude [mm]",
     "n": "number of half-waves over the line length L (odd)",
 }
-PHASES = ("coherent", "independent")
-#: where the gap is put for a wanted phase, as a fraction of s_hat
+#: the families a design may ask of a group of rods
+WANTED_FAMILIES = ("coherent", "independent")
+#: where the gap is put for a wanted family, as a fraction of s_hat
 COHERENT_GAP = 0.5
 INDEPENDENT_GAP = 1.5
 #: points of the scan of the allowed eps0 range that brackets the second target
@@ -71,7 +72,7 @@ class Constraints:
     s: float | None = None
     s_min: float = 0.0
     s_max: float = 50.0
-    phase: str | None = None
+    family: str | None = None
     E_B: float = MATERIAL_DEFAULTS["E_B"]
     E: float = MATERIAL_DEFAULTS["E"]
     t: float = MATERIAL_DEFAULTS["t"]
@@ -103,10 +104,11 @@ class Constraints:
                               f"{self.s_max:g})")
         if self.s is not None and self.s < 0:
             raise DesignError(f"s: must be >= 0 (got {self.s:g})")
-        if self.phase is not None and self.phase not in PHASES:
-            raise DesignError(f"phase: must be one of {', '.join(PHASES)} (got {self.phase!r})")
-        if self.phase is not None and self.N < 2:
-            raise DesignError("phase: needs N >= 2 rods (a lone rod has no neighbour)")
+        if self.family is not None and self.family not in WANTED_FAMILIES:
+            raise DesignError(f"family: must be one of {', '.join(WANTED_FAMILIES)} (got "
+                              f"{self.family!r})")
+        if self.family is not None and self.N < 2:
+            raise DesignError("family: needs N >= 2 rods (a lone rod has no neighbour)")
 
 
 @dataclass
@@ -162,13 +164,13 @@ def _gap(h: float, eps0: float, c: Constraints) -> float | None:
     if c.s is not None:
         return c.s
     sh = float(th.s_hat(h, eps0, b=c.b, E_B=c.E_B, E=c.E, t=c.t))
-    frac = INDEPENDENT_GAP if c.phase == "independent" else COHERENT_GAP
+    frac = INDEPENDENT_GAP if c.family == "independent" else COHERENT_GAP
     return frac * sh
 
 
 def forward(h: float, eps0: float, c: Constraints, s: float | None = None) -> dict[str, Any]:
     """The model's metrics for thickness ``h`` and pre-stretch ``eps0`` under ``c`` (the gap
-    from the phase rule unless ``s`` is given)."""
+    from the wanted family unless ``s`` is given)."""
     mat = {"b": c.b, "E_B": c.E_B, "E": c.E, "t": c.t}
     s = _gap(h, eps0, c) if s is None else s
     sh = float(th.s_hat(h, eps0, **mat))
@@ -226,7 +228,7 @@ def _metric_for_inverse(metric: str, h: float, eps0: float, c: Constraints) -> f
 
 
 def inverse(targets: dict[str, float], constraints: Constraints | None = None, *,
-            phase: str | None = None) -> Design:
+            family: str | None = None) -> Design:
     """Printable parameters that give ``targets`` (keys of :data:`TARGET_KEYS`).
 
     One size target (l, lam, a or n) with a fixed eps0 sets h. Two size targets need an eps0
@@ -235,8 +237,8 @@ def inverse(targets: dict[str, float], constraints: Constraints | None = None, *
     or a target out of reach.
     """
     c = constraints or Constraints()
-    if phase is not None:
-        c = Constraints(**{**asdict(c), "phase": phase})
+    if family is not None:
+        c = Constraints(**{**asdict(c), "family": family})
     c.check()
     bad = set(targets) - set(TARGET_KEYS)
     if bad:
@@ -285,12 +287,12 @@ def inverse(targets: dict[str, float], constraints: Constraints | None = None, *
         notes.append("n = 1: the rod is one arc over its whole length; l, lam and a are those "
                      "of that arc, not of eq. (1)")
     if c.N > 1 and c.s is None and not (c.s_min <= pred["s"] <= c.s_max):
-        raise DesignError(f"phase {c.phase or 'coherent'}: the gap it needs, s = "
+        raise DesignError(f"family {c.family or 'coherent'}: the gap it needs, s = "
                           f"{pred['s']:.4g} mm, is outside [s_min, s_max] = [{c.s_min:g}, "
                           f"{c.s_max:g}]")
     sens = _sensitivity(h, eps0, c)
     return Design(h=h, h_exact=h_exact, s=pred["s"], eps0=eps0, b=c.b, L=c.L, N=c.N,
-                  targets={**targets, **({"phase": c.phase} if c.phase else {})},
+                  targets={**targets, **({"family": c.family} if c.family else {})},
                   predicted=pred, predicted_exact=pred_exact, sensitivity=sens, notes=notes,
                   h_step=c.h_step)
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import theory as T
+from ..model.families import decide_family
 from .atlas import ATLAS_FILE, Atlas, locate, shipped_atlas
 
 __all__ = ["SINGLE_ROD_FILE", "predict_case"]
@@ -41,7 +42,8 @@ def _theory(case: Any) -> dict[str, Any]:
     mat = {"b": r.b, "E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t}
     p = T.predictions(r.h, e0, L=r.L, N=r.N, s=r.s if r.N > 1 else None, **mat)
     n = int(p["n"])
-    fam = str(p.get("family") or ("waves" if n > 1 else "bends"))
+    fam = str(p.get("family") or decide_family(
+        n, lam=r.L / (1 + e0), a=arch_rise(r.L, e0) if n == 1 else None))
     if r.N > 1 and fam in ("coherent", "independent"):  # bundled rods buckle as one
         pm = T.phase_map(r.h, r.s, eps0=e0, L=r.L, N=r.N, **mat)
         n = int(pm["n"].item())

@@ -56,10 +56,10 @@ def case_of_design(d: Design, h: float) -> dict[str, Any]:
 
 
 def _simulate_metrics(case: dict[str, Any]) -> dict[str, Any]:
-    from .. import api
+    from ..pipeline import analyse, simulate
 
-    result = api.simulate(api.case_from_dict(case))
-    ana = api.analyse(result)
+    result = simulate(case)
+    ana = analyse(result)
     rods = ana["rods"]
 
     def med(key: str) -> float:

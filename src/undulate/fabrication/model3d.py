@@ -2,7 +2,7 @@
 
 A designer continues in Rhino, Blender, Grasshopper or a browser viewer; they need the
 simulated shape as a mesh, not as ParaView's VTU. :func:`run_scene` reads a run folder (the
-files :func:`undulate.interfaces.output.write_result` leaves) and builds one scene:
+files :func:`undulate.pipeline.output.write_result` leaves) and builds one scene:
 
 ``fabric``
     the deformed fabric mid-surface, the triangles of the simulation mesh with vertex

@@ -25,18 +25,14 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from .common import fail as _fail
+
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
     help="Rods printed on a pre-stretched textile: simulate, analyse, study. Units: mm, MPa, N, s.",
 )
 console = Console()
-
-
-def _fail(msg: str, code: int = 2) -> typer.Exit:
-    """Print ``Error: msg`` (one line, no markup) on stderr; return the Exit to raise."""
-    typer.echo(f"Error: {msg}", err=True)
-    return typer.Exit(code=code)
 
 
 @app.callback()

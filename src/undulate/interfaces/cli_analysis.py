@@ -13,6 +13,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ..model.config import MATERIAL_DEFAULTS as _MAT
+from .common import fail as _fail
 
 __all__ = ["register"]
 
@@ -23,11 +24,6 @@ def _fmt(v: object, digits: int = 4) -> str:
     if isinstance(v, float):
         return f"{v:.{digits}g}"
     return str(v)
-
-
-def _fail(msg: str) -> typer.Exit:
-    typer.echo(f"Error: {msg}", err=True)
-    return typer.Exit(code=2)
 
 
 #: theory option -> (case section, field): the options take the case file's ranges

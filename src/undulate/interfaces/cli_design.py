@@ -36,8 +36,8 @@ def design(
     = None,
     s_min: Annotated[float, typer.Option("--s-min", help="smallest allowed gap, mm")] = 0.0,
     s_max: Annotated[float, typer.Option("--s-max", help="largest allowed gap, mm")] = 50.0,
-    phase: Annotated[str | None, typer.Option(
-        "--phase", help="coherent or independent (N >= 2)")] = None,
+    family: Annotated[str | None, typer.Option(
+        "--family", help="the group's wanted family: coherent or independent (N >= 2)")] = None,
     do_refine: Annotated[bool, typer.Option(
         "--refine", help="correct h with simulations (the real engine, seconds to minutes "
         "each)")] = False,
@@ -58,7 +58,7 @@ def design(
         targets = parse_targets(target)
         c = Constraints(L=L, N=N, b=b, h_min=h_min, h_max=h_max, h_step=h_step, h_tol=h_tol,
                         eps0=eps0, eps0_min=eps0_min, eps0_max=eps0_max, s=s, s_min=s_min,
-                        s_max=s_max, phase=phase)
+                        s_max=s_max, family=family)
         d = inverse(targets, c)
         if do_refine and (max_sims < 1 or not 0 < tol < 1):
             raise DesignError("--max-sims, --tol: need --max-sims >= 1 and 0 < --tol < 1")
@@ -95,7 +95,7 @@ def design(
         sen = d.sensitivity[k]
         table.add_row(k, "" if tgt is None else f"{tgt:g}", f"{p[k]:.4g}",
                       f"{sen['h_minus_tol']:.4g}", f"{sen['h_plus_tol']:.4g}")
-    table.add_row("family", str(d.targets.get("phase", "")), str(p["family"]), "", "")
+    table.add_row("family", str(d.targets.get("family", "")), str(p["family"]), "", "")
     con.print(table)
     for note in d.notes:
         con.print(f"note: {note}")
@@ -128,7 +128,7 @@ def predict(
     """
     from ..design.predict import SOURCES, predict_case
     from ..model import ConfigError, load_case
-    from .cli import _fail
+    from .common import fail as _fail
 
     if source not in SOURCES:
         raise _fail(f"--source: must be one of {', '.join(SOURCES)} (got {source!r})")

@@ -75,7 +75,7 @@ def gcode(
     from ..fabrication.drawing import write_drawing
     from ..model import ConfigError, Fabric, Release, Rods, load_case
     from ..model.config import check_value
-    from .cli import _fail
+    from .common import fail as _fail
 
     if (config is None) == (pattern is None):
         raise _fail("give a case file (CONFIG) or --pattern FILE, not both" if config
@@ -169,7 +169,7 @@ def export(
     undulate export undulate-demo --out demo.glb
     """
     from ..fabrication.model3d import ExportError, export_run
-    from .cli import _fail
+    from .common import fail as _fail
 
     try:
         path = export_run(run_dir, out, fmt)

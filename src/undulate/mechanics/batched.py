@@ -25,8 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 
-from .assemble import Assembly, _disk_label, gathered_kernels
+from .assemble import Assembly
 from .compiled import CachedJit
+from .forms import _disk_label, gathered_kernels
 
 __all__ = ["BatchedAssembly", "RunBatch", "check_same_topology"]
 

@@ -179,6 +179,10 @@ def _per_rod(chains: list[RodChain], sec: RodSection | list[RodSection]) -> list
     return secs
 
 
+def _col(secs: list[RodSection], name: str) -> np.ndarray:
+    return np.array([getattr(q, name) for q in secs], dtype=float)
+
+
 def rod_groups(
     chains: list[RodChain], x_printed: np.ndarray, sec: RodSection | list[RodSection]
 ) -> list[ElementGroup]:
@@ -191,64 +195,79 @@ def rod_groups(
     # gathers on the host: indexing a device array is a JAX operation of its own, compiled
     # (or loaded from the cache) for every new index shape, once per process
     xp = np.asarray(x_printed)
-
-    def col(secs_: list[RodSection], name: str) -> np.ndarray:
-        return np.array([getattr(q, name) for q in secs_], dtype=float)
-
     stencils = [rod_stencils(ch) for ch in chains]
     # every rod node's frame is read by the edges and vertices around it: the Hessian is made
     # through the frames, once per node (undulate.mechanics.frames)
     layout = FrameLayout(np.concatenate(stencils), frame_point)
     start = np.cumsum([len(st) for st in stencils]) - np.array([len(st) for st in stencils])
+    stretch, L0_rod = _stretch_group(stencils, secs, xp, layout, start)
+    groups = [stretch]
+    bend = _bend_twist_group(stencils, secs, xp, layout, start, L0_rod)
+    if bend is not None:
+        groups.append(bend)
+    groups.append(_footprint_group(stencils, secs, xp, L0_rod))
+    return groups
+
+
+def _stretch_group(stencils: list[np.ndarray], secs: list[RodSection], xp: np.ndarray,
+                   layout: FrameLayout, start: np.ndarray
+                   ) -> tuple[ElementGroup, list[np.ndarray]]:
+    """The rods' edges (stretch), and each rod's rest edge lengths."""
     e_idx = [np.concatenate([st[:-1], st[1:]], axis=1) for st in stencils]  # (m-1, 10) each
     e_sec = [sk for st, sk in zip(stencils, secs, strict=True) for _ in range(len(st) - 1)]
     e_all = np.concatenate(e_idx)
-    d_e = col(e_sec, "offset")
+    d_e = _col(e_sec, "offset")
     # one kernel call for all rods (rods of different lengths would each compile their own)
     L0 = np.asarray(_edge_len_v(xp[e_all], d_e))
     L0_rod = np.split(L0, np.cumsum([len(e) for e in e_idx])[:-1])
-    v_idx, v_sec, n_idx, n_sec, lv, ln = [], [], [], [], [], []
+    e_first = np.concatenate([s0 + np.arange(len(st) - 1)
+                              for s0, st in zip(start, stencils, strict=True)])
+    return ElementGroup("rod_stretch", rod_stretch, e_all, (d_e, L0, _col(e_sec, "EA")),
+                        frames=FrameSlots(layout, e_first)), L0_rod
+
+
+def _bend_twist_group(stencils: list[np.ndarray], secs: list[RodSection], xp: np.ndarray,
+                      layout: FrameLayout, start: np.ndarray, L0_rod: list[np.ndarray]
+                      ) -> ElementGroup | None:
+    """The rods' inner vertices (bending and twist); None when no rod has one."""
+    v_idx, v_sec, lv = [], [], []
     for st, sk, le in zip(stencils, secs, L0_rod, strict=True):
         m = st.shape[0]
         if m >= 3:
             v_idx.append(np.concatenate([st[:-2], st[1:-1], st[2:]], axis=1))  # (m-2, 15)
             v_sec += [sk] * (m - 2)
             lv.append(0.5 * (le[:-1] + le[1:]))  # Voronoi length: half the two rest edges
-        n_idx.append(st)
-        n_sec += [sk] * m
-        lnk = np.zeros(m)  # length of rod each node carries (half edges)
+    if not v_idx:
+        return None
+    v_all = np.concatenate(v_idx)
+    d_v = _col(v_sec, "offset")
+    rest = np.asarray(_vertex_v(xp[v_all], d_v))
+    slots = np.concatenate([s0 + np.arange(len(st) - 2)
+                            for s0, st in zip(start, stencils, strict=True) if len(st) >= 3])
+    return ElementGroup(
+        "rod_bend_twist", rod_bend_twist, v_all,
+        (d_v, rest, np.concatenate(lv), _col(v_sec, "EI_out"), _col(v_sec, "EI_in"),
+         _col(v_sec, "GJ")),
+        frames=FrameSlots(layout, slots))
+
+
+def _footprint_group(stencils: list[np.ndarray], secs: list[RodSection], xp: np.ndarray,
+                     L0_rod: list[np.ndarray]) -> ElementGroup:
+    """The rods' nodes bonded to the fabric (each carries half its two edges' length)."""
+    n_sec = [sk for st, sk in zip(stencils, secs, strict=True) for _ in range(st.shape[0])]
+    ln = []
+    for st, le in zip(stencils, L0_rod, strict=True):
+        lnk = np.zeros(st.shape[0])  # length of rod each node carries (half edges)
         lnk[:-1] += 0.5 * le
         lnk[1:] += 0.5 * le
         ln.append(lnk)
-
-    e_first = np.concatenate([s0 + np.arange(len(st) - 1)
-                              for s0, st in zip(start, stencils, strict=True)])
-    groups = [ElementGroup("rod_stretch", rod_stretch, e_all, (d_e, L0, col(e_sec, "EA")),
-                           frames=FrameSlots(layout, e_first))]
-    if v_idx:
-        v_all = np.concatenate(v_idx)
-        d_v = col(v_sec, "offset")
-        rest = np.asarray(_vertex_v(xp[v_all], d_v))
-        groups.append(
-            ElementGroup(
-                "rod_bend_twist",
-                rod_bend_twist,
-                v_all,
-                (d_v, rest, np.concatenate(lv), col(v_sec, "EI_out"), col(v_sec, "EI_in"),
-                 col(v_sec, "GJ")),
-                frames=FrameSlots(layout, np.concatenate(
-                    [s0 + np.arange(len(st) - 2) for s0, st in zip(start, stencils, strict=True)
-                     if len(st) >= 3])),
-            )
-        )
-    n_all = np.concatenate(n_idx)
+    n_all = np.concatenate(stencils)
     rest_n = np.asarray(_node_v(xp[n_all]))
     lnn = np.concatenate(ln)
-    E_B, nu_B, b, h = (col(n_sec, k) for k in ("E_B", "nu_B", "b", "h"))
+    E_B, nu_B, b, h = (_col(n_sec, k) for k in ("E_B", "nu_B", "b", "h"))
     G_B = E_B / (2.0 * (1.0 + nu_B))
     k = np.stack([E_B * b * h * lnn, G_B * b * h * lnn, E_B * h * lnn / b], axis=1)
-    groups.append(ElementGroup("rod_footprint", rod_footprint, n_all, (rest_n, k)))
-    return groups
+    return ElementGroup("rod_footprint", rod_footprint, n_all, (rest_n, k))
 
 
 def _centre_point(x5: jnp.ndarray, d: jnp.ndarray) -> jnp.ndarray:

@@ -268,10 +268,26 @@ class CachedJit:
         if root is None:
             return self._jit
         try:
-            from jax import export
-            from jax.experimental import serialize_executable
+            from jax import export  # noqa: F401 - both needed, or plain jit
+            from jax.experimental import serialize_executable  # noqa: F401
         except ImportError:  # pragma: no cover - old JAX
             return self._jit
+        digest, exe_digest = self._digests(key)
+        exe_path = root / "exe" / f"{self.name}-{exe_digest}.xlaexe"
+        loaded = _load_executable(exe_path) if exe_path.is_file() else None
+        if loaded is not None:
+            return loaded
+        exp = self._exported(root / "export" / f"{self.name}-{digest}.jaxexport", args)
+        if exp is None:
+            return self._jit
+        program = jax.jit(exp.call)
+        marker = exe_path.with_name(exe_path.name + ".none")
+        if marker.is_file():
+            return program
+        return _compile_and_keep(program, args, exe_path, marker, root)
+
+    def _digests(self, key: tuple) -> tuple[str, str]:
+        """The keys of the exported program and of the executable (see the module doc)."""
         digest = hashlib.sha256(
             f"{_source_digest()}|{self.name}|{key}|{jax.default_backend()}|"
             f"x64={jax.config.jax_enable_x64}".encode()
@@ -281,52 +297,65 @@ class CachedJit:
             f"{digest}|{backend.platform}|{backend.platform_version}|"
             f"{os.environ.get('XLA_FLAGS', '')}|{_machine_digest()}".encode()
         ).hexdigest()[:24]
-        exe_path = root / "exe" / f"{self.name}-{exe_digest}.xlaexe"
-        if exe_path.is_file():
-            try:
-                payload, in_tree, out_tree = pickle.loads(exe_path.read_bytes())
-                loaded = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
-                with contextlib.suppress(OSError):  # recently used (access time): pruned last
-                    os.utime(exe_path, ns=(time.time_ns(), exe_path.stat().st_mtime_ns))
-                return loaded
-            except Exception:  # noqa: BLE001 - a damaged entry is made again
-                pass
-        path = root / "export" / f"{self.name}-{digest}.jaxexport"
-        exp = None
+        return digest, exe_digest
+
+    def _exported(self, path: Path, args: tuple) -> Any:
+        """The exported program from ``path``, or traced, exported and written there; None
+        when this JAX cannot export it."""
+        from jax import export
+
         if path.is_file():
             try:
-                exp = export.deserialize(bytearray(path.read_bytes()))
+                return export.deserialize(bytearray(path.read_bytes()))
             except Exception:  # noqa: BLE001 - a damaged entry is made again
-                exp = None
-        if exp is None:
-            try:
-                exp = export.export(self._jit)(*args)
-                data = exp.serialize()
-            except Exception:  # noqa: BLE001 - e.g. flatbuffers missing: plain jit
-                return self._jit
-            try:  # concurrent writers of one key write the same bytes; readers never see a part
-                with atomic_path(path) as tmp:
-                    Path(tmp).write_bytes(bytes(data))
-            except OSError:
-                pass  # an unwritable cache only costs the next process a trace
-        program = jax.jit(exp.call)
-        marker = exe_path.with_name(exe_path.name + ".none")
-        if marker.is_file():
-            return program
+                pass
         try:
-            compiled = program.lower(*args).compile()
-        except Exception:  # noqa: BLE001 - e.g. a backend without AOT compilation
-            return program
-        try:
-            blob = pickle.dumps(serialize_executable.serialize(compiled))
-            loaded = serialize_executable.deserialize_and_load(*pickle.loads(blob))
-            keep = _same_bits(compiled(*args), loaded(*args))
-        except Exception:  # noqa: BLE001 - not serializable here
-            keep = False
-        try:
-            with atomic_path(exe_path if keep else marker) as tmp:
-                Path(tmp).write_bytes(blob if keep else b"")
-            prune_cache(root)
+            exp = export.export(self._jit)(*args)
+            data = exp.serialize()
+        except Exception:  # noqa: BLE001 - e.g. flatbuffers missing: plain jit
+            return None
+        try:  # concurrent writers of one key write the same bytes; readers never see a part
+            with atomic_path(path) as tmp:
+                Path(tmp).write_bytes(bytes(data))
         except OSError:
-            pass  # an unwritable cache only costs the next process a compilation
-        return compiled
+            pass  # an unwritable cache only costs the next process a trace
+        return exp
+
+
+def _load_executable(exe_path: Path) -> Callable[..., Any] | None:
+    """The executable kept at ``exe_path`` (its access time set: pruned last), or None."""
+    from jax.experimental import serialize_executable
+
+    try:
+        payload, in_tree, out_tree = pickle.loads(exe_path.read_bytes())
+        loaded = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+        with contextlib.suppress(OSError):  # recently used (access time): pruned last
+            os.utime(exe_path, ns=(time.time_ns(), exe_path.stat().st_mtime_ns))
+        return loaded
+    except Exception:  # noqa: BLE001 - a damaged entry is made again
+        return None
+
+
+def _compile_and_keep(program: Callable[..., Any], args: tuple, exe_path: Path, marker: Path,
+                      root: Path) -> Callable[..., Any]:
+    """Compile ``program`` for ``args``; keep the executable at ``exe_path`` when a copy
+    loaded back from its bytes gives the same bits (else write ``marker``)."""
+    from jax.experimental import serialize_executable
+
+    try:
+        compiled = program.lower(*args).compile()
+    except Exception:  # noqa: BLE001 - e.g. a backend without AOT compilation
+        return program
+    try:
+        blob = pickle.dumps(serialize_executable.serialize(compiled))
+        loaded = serialize_executable.deserialize_and_load(*pickle.loads(blob))
+        keep = _same_bits(compiled(*args), loaded(*args))
+    except Exception:  # noqa: BLE001 - not serializable here
+        keep = False
+    try:
+        with atomic_path(exe_path if keep else marker) as tmp:
+            Path(tmp).write_bytes(blob if keep else b"")
+        prune_cache(root)
+    except OSError:
+        pass  # an unwritable cache only costs the next process a compilation
+    return compiled

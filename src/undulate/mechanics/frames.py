@@ -1,7 +1,7 @@
 """Strain-form groups whose elements share per-node frames, assembled through the frames.
 
 The rods' stretch and bend/twist energies (:mod:`undulate.mechanics.rod`) are strain forms
-(:class:`~undulate.mechanics.assemble.StrainForm`) of per-node intermediates: each rod node k
+(:class:`~undulate.mechanics.forms.StrainForm`) of per-node intermediates: each rod node k
 has a *frame* ``q_k = block(x_k)`` (for the rods ``frame_point``: the fabric point p under the
 centre line, the fabric normal n and the footprint's width vector w, from the node's stencil of
 five fabric points), and an element reads the frames of consecutive nodes (an edge two, a
@@ -113,6 +113,31 @@ def _behind(a: jnp.ndarray, k: int) -> jnp.ndarray:
     return jnp.concatenate([jnp.zeros((k,) + a.shape[1:], a.dtype), a[:-k]])
 
 
+def _add_form(sf, nb: int, mq: int, qe, valid, stress, params, gq, cq, B: list):
+    """Add one strain form's gradient, stress and Hessian blocks (per frame, ``nb`` frames an
+    element) onto the layout's ``gq``, ``cq`` and ``B`` (B in place); return (gq, cq)."""
+
+    def one(qv, s, *p):
+        e = sf.strains(qv, *p)
+        Je = sf.jacobian(qv, *p)
+        k = sf.moduli(*p)
+        Hq = (Je.T * k) @ Je + sf.weighted_hessian(qv, s, *p)
+        return (k * e) @ Je, Hq, s @ Je
+
+    ge, He, ce = chunked_vmap(one)(qe, stress, *params)
+    v = valid > 0
+    ge = jnp.where(v[:, None], ge, 0.0)
+    ce = jnp.where(v[:, None], ce, 0.0)
+    He = jnp.where(v[:, None, None], He, 0.0)
+    for i in range(nb):
+        gq = gq + _behind(ge[:, i * mq : (i + 1) * mq], i)
+        cq = cq + _behind(ce[:, i * mq : (i + 1) * mq], i)
+        for j in range(i, nb):
+            B[j - i] = B[j - i] + _behind(
+                He[:, i * mq : (i + 1) * mq, j * mq : (j + 1) * mq], i)
+    return gq, cq
+
+
 def _fused_kernel(block: Callable, forms: tuple, n_blocks: tuple[int, ...],
                   n_params: tuple[int, ...]) -> Callable:
     """The jittable kernel of the groups with strain forms ``forms`` (``n_blocks`` blocks and
@@ -141,32 +166,13 @@ def _fused_kernel(block: Callable, forms: tuple, n_blocks: tuple[int, ...],
         B = [jnp.zeros((M, mq, mq)) for _ in range(D + 1)]
         pos = 0
         for t, (sf, nb) in enumerate(zip(forms, n_blocks, strict=True)):
-            valid = gargs[pos]
             n_par = n_params[t]
-            params = gargs[pos + 1 : pos + 1 + n_par]
+            valid, params = gargs[pos], gargs[pos + 1 : pos + 1 + n_par]
             stress = gargs[pos + 1 + n_par]
             pos += n_par + 2
             qe = jnp.concatenate([_ahead(q, j) for j in range(nb)], axis=1)  # (M, nb m)
             qe = jnp.where(valid[:, None] > 0, qe, qe[fill[t]])
-
-            def one(qv, s, *p, sf=sf):
-                e = sf.strains(qv, *p)
-                Je = sf.jacobian(qv, *p)
-                k = sf.moduli(*p)
-                Hq = (Je.T * k) @ Je + sf.weighted_hessian(qv, s, *p)
-                return (k * e) @ Je, Hq, s @ Je
-
-            ge, He, ce = chunked_vmap(one)(qe, stress, *params)
-            v = valid > 0
-            ge = jnp.where(v[:, None], ge, 0.0)
-            ce = jnp.where(v[:, None], ce, 0.0)
-            He = jnp.where(v[:, None, None], He, 0.0)
-            for i in range(nb):
-                gq = gq + _behind(ge[:, i * mq : (i + 1) * mq], i)
-                cq = cq + _behind(ce[:, i * mq : (i + 1) * mq], i)
-                for j in range(i, nb):
-                    B[j - i] = B[j - i] + _behind(
-                        He[:, i * mq : (i + 1) * mq, j * mq : (j + 1) * mq], i)
+            gq, cq = _add_form(sf, nb, mq, qe, valid, stress, params, gq, cq, B)
 
         def weighted(yk, ck):
             return jax.hessian(lambda z: jnp.dot(ck, bf(z)))(yk)
@@ -205,7 +211,7 @@ class FusedFrames:
     """
 
     def __init__(self, asm, indices: Sequence[int]) -> None:
-        from .assemble import strain_form
+        from .forms import strain_form
 
         self.indices = list(indices)
         groups = [asm.groups[i] for i in self.indices]
@@ -328,7 +334,7 @@ class FusedFrames:
 def fused_frame_sets(asm) -> list[FusedFrames]:
     """One :class:`FusedFrames` per frame layout that strain-form groups of ``asm`` share
     (groups without ``frames`` are assembled element by element)."""
-    from .assemble import strain_form
+    from .forms import strain_form
 
     sets: dict[int, list[int]] = {}
     for i, g in enumerate(asm.groups):

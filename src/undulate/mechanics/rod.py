@@ -32,7 +32,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .assemble import StrainForm, StrainTerm
+from .forms import StrainForm, StrainTerm
 
 
 def _unit(v: jnp.ndarray) -> jnp.ndarray:
@@ -168,7 +168,7 @@ def _bend_twist_moduli(d, rest, lv, EI_out, EI_in, GJ):
 
 # The strains as terms of few variables each (a StrainTerm: strains of a linear projection of
 # the frame points q = (p, n, w) per node, X = p + d n): their second derivatives are then
-# Hessians of 12 and 9 variables instead of 27 (see assemble.StrainTerm).
+# Hessians of 12 and 9 variables instead of 27 (see forms.StrainTerm).
 def _select(n_nodes: int, node: int, part: int) -> np.ndarray:
     """(3, 9 n_nodes) matrix picking p (part 0), n (1) or w (2) of one node from q."""
     m = np.zeros((3, 9 * n_nodes))

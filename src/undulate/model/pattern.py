@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from .config import number_problem
+from .validators import number_problem
 
 __all__ = ["Line", "PatternError", "read_svg", "read_dxf", "read_pattern", "check_lines",
            "centred", "line_from_points"]
@@ -345,8 +345,8 @@ def check_lines(lines: list[Line], *, b: float = 1.0, min_gap: float = 0.0,
     ids = [ln.id for ln in lines]
     dup = {i for i in ids if ids.count(i) > 1}
     if dup:
-        raise PatternError(f"line ids must be unique; repeated: {sorted(dup)} (a family's "
-                           "lines are named <id>0, <id>1, ...: give the family another id)")
+        raise PatternError(f"line ids must be unique; repeated: {sorted(dup)} (an array's "
+                           "lines are named <id>0, <id>1, ...: give the array another id)")
     for ln in lines:
         p = _self_intersection(ln)
         if p is not None:

@@ -28,7 +28,7 @@ from ..mechanics.fabric import dead_load
 from ..mesh import FabricMesh
 
 if TYPE_CHECKING:
-    from .release import Simulation
+    from .simulation import Simulation
 
 __all__ = ["Boundary", "DisplacementControl", "ForceControl", "clamp_positions",
            "clamped_nodes", "edge_nodes", "gauge_pins", "make_boundary"]

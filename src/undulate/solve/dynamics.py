@@ -19,48 +19,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanics.assemble import Assembly, ElementGroup
-from ..mechanics.fabric import dead_load, inertia
+from ..mechanics.fabric import inertia
+from .boundary import clamp_positions
 from .linear import make_solver
 from .newton import ConvergenceError, NewtonOptions, minimize
+from .simulation import rod_heights
+from .terms import gravity_group, lumped_masses
 
 __all__ = ["lumped_masses", "gravity_group", "release_inertial"]
 
 
-def lumped_masses(sim) -> np.ndarray:
-    """Node masses [t] of fabric and rods."""
-    mesh, case = sim.mesh, sim.case
-    X = mesh.X
-    tri = mesh.tris
-    A0 = 0.5 * np.abs(
-        (X[tri[:, 1], 0] - X[tri[:, 0], 0]) * (X[tri[:, 2], 1] - X[tri[:, 0], 1])
-        - (X[tri[:, 1], 1] - X[tri[:, 0], 1]) * (X[tri[:, 2], 0] - X[tri[:, 0], 0])
-    )
-    m = np.zeros(mesh.n_nodes)
-    for c in range(3):
-        m += np.bincount(tri[:, c], weights=case.fabric.rho * case.fabric.t * A0 / 3.0,
-                         minlength=mesh.n_nodes)
-    for ch, sec, path in zip(mesh.rods, sim.sections, case.rod_paths(), strict=True):
-        seg = path.length / max(ch.n_nodes - 1, 1)  # nodes are equally spaced along the rod
-        ln = np.full(ch.n_nodes, seg)
-        ln[[0, -1]] = 0.5 * seg
-        m[ch.p] += case.rods.rho_B * sec.b * sec.h * ln
-    return m
-
-
-def gravity_group(sim, free: np.ndarray) -> ElementGroup | None:
-    """The weight of fabric and rods (lumped masses times ``case.gravity.g``) on the free
-    nodes, or None when gravity is off."""
-    grav = sim.case.gravity
-    if not grav.on:
-        return None
-    nodes = np.nonzero(free)[0]
-    w = lumped_masses(sim)[nodes, None] * np.asarray(grav.g, dtype=float)[None, :]
-    return ElementGroup("gravity", dead_load, nodes[:, None], (w,))
-
-
 def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, progress):
-    from .release import _heights, clamp_positions
-
     dyn = sim.case.dynamics
     eps0 = sim.case.release.eps0
     dt = dyn.dt
@@ -95,7 +64,7 @@ def release_inertial(sim, asm: Assembly, x: np.ndarray, opts: NewtonOptions, pro
         x = x_new
         rec = dict(step=k, time=k * dt, release_strain=eps0 - e, clamp_strain=e,
                    energy=asm.energy(x), kinetic=float(0.5 * np.sum(mass[:, None] * v**2)),
-                   **_heights(sim, x), newton_iterations=res.iterations,
+                   **rod_heights(sim, x), newton_iterations=res.iterations,
                    negative_steps=res.negative_steps, residual=res.residual)
         history.append(rec)
         if progress is not None:

@@ -35,142 +35,28 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..mechanics.assemble import Assembly, ElementGroup
-from ..mechanics.build import (
-    RodSection,
-    rod_centrelines,
-)
+from ..mechanics.build import rod_centrelines
 from ..mechanics.fabric import dead_load
-from ..mechanics.material import FabricLaw, fabric_law
-from ..mesh import FabricMesh, RodPath, build_mesh, stretch_rotation
 from ..model import Case
 from .boundary import Boundary, clamp_positions, clamped_nodes, edge_nodes, make_boundary
 from .linear import SingularMatrixError, make_solver, single_threaded_blas
 from .newton import ConvergenceError, NewtonOptions, minimize
+from .simulation import (  # re-exported: a release's inputs and result, by their old address
+    ProgressFn,
+    SimResult,
+    Simulation,
+    imperfection_field,
+    prepare,
+    printed_lateral_stretch,
+    rod_heights,
+)
 from .terms import TermState, groups
 
-__all__ = ["Simulation", "SimResult", "prepare", "run_release", "imperfection_field",
-           "clamp_positions", "edge_nodes"]
-
-ProgressFn = Callable[[float, dict], None]
-
-
-@dataclass
-class SimResult:
-    """Final rest state and the record of how it was reached."""
-
-    case: Case
-    mesh: FabricMesh
-    sections: list[RodSection]  # one per rod, in the order of mesh.rods and case.rod_paths()
-    x_reference: np.ndarray  # (n, 3) unstretched fabric
-    x_printed: np.ndarray  # (n, 3) pre-stretched, flat, at printing
-    x_final: np.ndarray  # (n, 3) rest state after release
-    centerlines: list[np.ndarray]  # final rod centre lines (m, 3)
-    centerlines_printed: list[np.ndarray]
-    history: list[dict]
-    stats: dict
-    energies: dict
-    element_energy: dict = field(default_factory=dict)
-
-
-@dataclass
-class Simulation:
-    case: Case
-    mesh: FabricMesh
-    sections: list[RodSection]  # one per rod
-    X3: np.ndarray
-    fabric: list[ElementGroup]  # groups of the terms acting from the pre-stretch on (terms.py)
-    force_scale: float
-
-    @property
-    def law(self) -> FabricLaw:
-        """The fabric's material law (:mod:`undulate.mechanics.material`)."""
-        return case_law(self.case)
-
-    @property
-    def rotation(self) -> np.ndarray:
-        """(3, 3) rotation from the stretch frame (x along the stretch) to the drawing frame."""
-        rot = np.eye(3)
-        rot[:2, :2] = stretch_rotation(self.case.release.direction)
-        return rot
-
-
-def case_law(case: Case) -> FabricLaw:
-    """The material law of ``case.fabric`` (neo-Hookean, or orthotropic with E_y and G)."""
-    f = case.fabric
-    return fabric_law(f.E, f.nu, f.E_y, f.G)
-
-
-def printed_lateral_stretch(case: Case) -> float:
-    """Stretch across the stretch lam_y of the homogeneous pre-stretched state that maps the
-    reference mesh onto the printed one: the law's free uniaxial value, or 1 when the frame
-    also holds both edges across the stretch (``release.clamps`` with bottom and top; with one
-    of them the sheet narrows towards it, see :func:`prepare`)."""
-    if {"bottom", "top"} <= set(case.release.clamps):
-        return 1.0
-    return case_law(case).lateral_stretch(case.release.eps0)
-
-
-def prepare(case: Case) -> Simulation:
-    """Mesh the case and build the fabric's element groups."""
-    f, r = case.fabric, case.rods
-    eps0 = case.release.eps0
-    lam_y = printed_lateral_stretch(case)
-    m = case.mesh
-    paths = case.rod_paths()
-    if case.pattern is None:  # rods along x: the structured grid can take them too
-        rods_in: list = case.segments()
-    else:
-        rods_in = [RodPath(p.points, b=p.b, id=p.id) for p in paths]
-    mesh = build_mesh(
-        rods_in, r.b, case.fabric_extent(), eps0=eps0, lam_y=lam_y,
-        dx_rod=m.dx_rod, dx_far=m.dx_far, dy_far=m.dy_far, grading=m.grading, kind=m.kind,
-        h_far=m.h_far, direction=case.release.direction,
-    )
-    secs = [RodSection(h=p.h, b=p.b, E_B=r.E_B, nu_B=r.nu_B, t=f.t, d=r.offset) for p in paths]
-    across = [e for e in ("bottom", "top") if e in case.release.clamps]
-    if len(across) == 1 and lam_y != 1.0:
-        # one edge across the stretch held (at its printed place): the homogeneous state
-        # narrows towards it, y_p = y_e + lam_y (Y - y_e), so the reference sheet is moved
-        # by y_e (1 - 1 / lam_y) across the stretch (a rigid shift of the reference)
-        y_e = case.fabric_extent()[2 if across[0] == "bottom" else 3]
-        shift = stretch_rotation(case.release.direction) @ np.array(
-            [0.0, y_e * (1.0 - 1.0 / lam_y)])
-        mesh = replace(mesh, X=mesh.X + shift,
-                       ys=None if mesh.ys is None else mesh.ys + shift[1])
-    X3 = np.c_[mesh.X, np.zeros(mesh.n_nodes)]
-    sim = Simulation(case, mesh, secs, X3, [], force_scale=f.E * f.t * m.dx_rod)
-    sim.fabric = groups(sim, ("prestretch",))
-    return sim
-
+__all__ = ["ProgressFn", "Simulation", "SimResult", "prepare", "prestretch", "run_release",
+           "imperfection_field", "printed_lateral_stretch", "clamp_positions", "edge_nodes"]
 
 #: the frame's nodes during the pre-stretch (kept under its old name for the tests and benchmarks)
 _clamped = clamped_nodes
-
-
-def imperfection_field(n: int, dx: float, amplitude: float, correlation: float,
-                       rng: np.random.Generator) -> np.ndarray:
-    """Smooth random profile of RMS ``amplitude`` along ``n`` nodes spaced ``dx``."""
-    if amplitude == 0.0 or n == 0:
-        return np.zeros(n)
-    w = rng.standard_normal(n + 64)
-    sig = max(correlation / dx, 0.5)
-    k = np.arange(-int(4 * sig) - 1, int(4 * sig) + 2)
-    ker = np.exp(-0.5 * (k / sig) ** 2)
-    z = np.convolve(w, ker, mode="same")[32 : 32 + n]
-    z -= z.mean()
-    rms = np.sqrt(np.mean(z**2))
-    return amplitude * z / rms if rms > 0 else np.zeros(n)
-
-
-def _heights(sim: Simulation, x: np.ndarray) -> dict[str, float]:
-    """Highest point of the rods' centre lines above their printed level (``max_height``, as
-    in metrics.json), the largest deflection up or down (``max_deflection``) and the same per
-    rod (``rod_max_deflection``)."""
-    z = [c[:, 2] - sk.offset for c, sk in
-         zip(rod_centrelines(sim.mesh.rods, x, sim.sections), sim.sections, strict=True)]
-    return dict(max_height=float(max(np.max(zi) for zi in z)),
-                max_deflection=float(max(np.max(np.abs(zi)) for zi in z)),
-                rod_max_deflection=[float(np.max(np.abs(zi))) for zi in z])
 
 
 def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
@@ -322,7 +208,7 @@ def hang(sim: Simulation, x_rest: np.ndarray, x: np.ndarray, opts: NewtonOptions
         rec = dict(step=step0 + k - 1, stage="hang", let_go=k / hg.steps,
                    release_strain=last.get("release_strain"),
                    clamp_strain=last.get("clamp_strain"), energy=res.energy,
-                   **_heights(sim, x), newton_iterations=res.iterations,
+                   **rod_heights(sim, x), newton_iterations=res.iterations,
                    negative_steps=res.negative_steps, residual=res.residual)
         history.append(rec)
         if progress is not None:
@@ -420,116 +306,158 @@ def _next_increment(de: float, de_nom: float, max_factor: float, buckled: bool, 
     return min(2.0 * de, (max_factor if easy else 1.0) * de_nom)
 
 
-def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
-                         progress: ProgressFn | None, bd: Boundary
-                         ) -> tuple[np.ndarray, list[dict], dict]:
-    rel = sim.case.release
-    eps0 = rel.eps0
-    e_end = rel.final_strain  # the clamps stop here (0: a full release)
-    de_nom = (eps0 - e_end) / rel.steps
-    de_min = de_nom * rel.min_step_fraction
-    e = eps0
-    de = de_nom / rel.onset_substeps
-    solver = make_solver(opts.linear_solver)
-    rng = np.random.default_rng(sim.case.imperfection.seed + 1)
-    history: list[dict] = []
-    snap_opts = replace(opts, curved_budget=rel.snap_iterations,
-                        definite_start=GROWN_STEP_DEFINITE_START)
-    snap_opts_last = replace(snap_opts, definite_start=False)
-    totals = dict(newton_iterations=0, negative_curvature_steps=0, step_cuts=0, snap_cuts=0,
-                  unstable_start_cuts=0,
-                  assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0, line_search_time_s=0.0)
+@dataclass
+class _Walk:
+    """Where the quasi-static release stands between two steps."""
+
+    x: np.ndarray  # the last equilibrium
+    e: float  # its clamp strain
+    de: float  # the next increment
+    steps: list  # (e_old, e_new) steps queued (halves of a cut step)
+    x_prev: np.ndarray | None = None  # the equilibrium before (secant predictor)
+    e_prev: float | None = None
+    chord_ready: bool = False  # the solver holds the last equilibrium's factorization
+    buckled: bool = False
+    history: list = field(default_factory=list)
+    totals: dict = field(default_factory=lambda: dict(
+        newton_iterations=0, negative_curvature_steps=0, step_cuts=0, snap_cuts=0,
+        unstable_start_cuts=0, assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0,
+        line_search_time_s=0.0))
+
+    def next_step(self, eps0: float, e_end: float) -> tuple[float, float]:
+        if self.steps:
+            return self.steps.pop()
+        # equal increments add up to eps0 only to roundoff: a remainder of 1e-17 would
+        # otherwise make an extra, empty step
+        e, de = self.e, self.de
+        return e, (e - de if e - de > e_end + 1e-9 * eps0 else e_end)
+
+    def count(self, res) -> None:
+        tot = self.totals
+        tot["newton_iterations"] += res.iterations
+        tot["negative_curvature_steps"] += res.negative_steps
+        for key in ("assembly", "factor", "eig", "line_search"):
+            tot[f"{key}_time_s"] += res.times.get(key, 0.0)
+
+
+def _rod_masks(sim: Simulation, asm: Assembly) -> tuple[np.ndarray, list, np.ndarray]:
+    """(nodes on a rod, each rod's nodes, the free unknowns on rods: minimize's ``watch``)."""
     rod_nodes = [np.concatenate([ch.p, ch.qp, ch.qm]) for ch in sim.mesh.rods]
     on_rod = np.zeros(sim.mesh.n_nodes, dtype=bool)
     for rn in rod_nodes:
         on_rod[rn] = True
-    watch = np.repeat(on_rod, 3)[asm.free_dofs]
+    return on_rod, rod_nodes, np.repeat(on_rod, 3)[asm.free_dofs]
+
+
+def _predict(sim: Simulation, asm: Assembly, bd: Boundary, w: _Walk, e_old: float,
+             e_new: float, on_rod: np.ndarray, rod_nodes: list, solver) -> np.ndarray:
+    """The start of the step from ``e_old`` to ``e_new``.
+
+    The secant of the last two equilibria when there are two (it follows the buckled branch;
+    measured on the default rod: 146 Newton iterations against 226 for the affine predictor
+    alone, same final state) unless its energy is more than twice that of the affine one
+    (fabric follows the clamps in x while the nearly inextensible rods keep their shape and
+    move with their centroid): right after a change of mode the secant extrapolates the jump
+    (measured on a thin rod: energy 219 N mm against 18.5 before). A plain "lower energy" test
+    picks the affine start too often (its energy is lower but it is farther from the branch:
+    311 against 270 iterations). Then the chord correction (:func:`_chord_correction`).
+    """
+    rel = sim.case.release
+    x = w.x
+    x_pred = _affine_predictor(x, e_old, e_new, on_rod, rod_nodes,
+                               sim.rotation if rel.direction else None)
+    x_pred = bd.place(e_new, x_pred)
+    if w.x_prev is not None and w.e_prev is not None and w.e_prev != e_old and e_old != e_new:
+        x_sec = x + (x - w.x_prev) * ((e_old - e_new) / (w.e_prev - e_old))
+        x_sec = bd.place(e_new, x_sec)
+        if asm.energy(x_sec) < 2.0 * asm.energy(x_pred):
+            x_pred = x_sec
+    if w.chord_ready:
+        x_pred = _chord_correction(asm, solver, x_pred)
+    return x_pred
+
+
+def _cut(w: _Walk, res, e_old: float, e_new: float, de_min: float, eps0: float,
+         adaptive: bool) -> None:
+    """Queue the two halves of a step that did not converge, or raise ConvergenceError."""
+    if adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
+        w.de = (e_old - e_new) / 2
+        w.totals["step_cuts"] += 1
+        w.totals["snap_cuts"] += int(res.over_budget)
+        w.totals["unstable_start_cuts"] += int(res.unstable_start)
+        w.steps.append((e_old, e_old - w.de))
+        return
+    n = len(w.history)
+    raise ConvergenceError(f"release step {n} (release strain {eps0 - e_new:.4g}): "
+                           f"{res.message}", step=n, residual=res.residual,
+                           release_strain=eps0 - e_new)
+
+
+def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: NewtonOptions,
+                         progress: ProgressFn | None, bd: Boundary
+                         ) -> tuple[np.ndarray, list[dict], dict]:
+    rel = sim.case.release
+    eps0, e_end = rel.eps0, rel.final_strain  # the clamps stop at e_end (0: a full release)
+    de_nom = (eps0 - e_end) / rel.steps
+    de_min = de_nom * rel.min_step_fraction
+    solver = make_solver(opts.linear_solver)
+    rng = np.random.default_rng(sim.case.imperfection.seed + 1)
+    snap_opts = replace(opts, curved_budget=rel.snap_iterations,
+                        definite_start=GROWN_STEP_DEFINITE_START)
+    snap_opts_last = replace(snap_opts, definite_start=False)
+    on_rod, rod_nodes, watch = _rod_masks(sim, asm)
     # equilibrium with the imperfection at the start (clamps still at eps0)
-    steps = [(e, e)]
-    buckled = False
-    x_prev = None
-    e_prev = None
-    chord_ready = False
+    w = _Walk(x, eps0, de_nom / rel.onset_substeps, [(eps0, eps0)])
     while True:
-        if steps:
-            e_old, e_new = steps.pop()
-        else:
-            # equal increments add up to eps0 only to roundoff: a remainder of 1e-17 would
-            # otherwise make an extra, empty step
-            e_old, e_new = e, (e - de if e - de > e_end + 1e-9 * eps0 else e_end)
-        # predictor: the secant of the last two equilibria when there are two (it follows the
-        # buckled branch; measured on the default rod: 146 Newton iterations against 226 for
-        # the affine predictor alone, same final state) unless its energy is more than twice
-        # that of the affine one (fabric follows the clamps in x while the nearly inextensible
-        # rods keep their shape and move with their centroid): right after a change of mode
-        # the secant extrapolates the jump (measured on a thin rod: energy 219 N mm against
-        # 18.5 before). A plain "lower energy" test picks the affine start too often (its
-        # energy is lower but it is farther from the branch: 311 against 270 iterations).
-        x_pred = _affine_predictor(x, e_old, e_new, on_rod, rod_nodes,
-                                   sim.rotation if rel.direction else None)
-        x_pred = bd.place(e_new, x_pred)
-        if x_prev is not None and e_prev is not None and e_prev != e_old and e_old != e_new:
-            x_sec = x + (x - x_prev) * ((e_old - e_new) / (e_prev - e_old))
-            x_sec = bd.place(e_new, x_sec)
-            if asm.energy(x_sec) < 2.0 * asm.energy(x_pred):
-                x_pred = x_sec
-        if chord_ready:
-            x_pred = _chord_correction(asm, solver, x_pred)
+        e_old, e_new = w.next_step(eps0, e_end)
+        x_pred = _predict(sim, asm, bd, w, e_old, e_new, on_rod, rod_nodes, solver)
         # a long step gets a budget of Newton iterations once it has followed negative
         # curvature: one that needs more holds a change of the rods' pattern and is taken
         # again in halves (below), so the change starts from just past the strain where the
-        # old pattern ends, not from wherever a long jump lands
+        # old pattern ends, not from wherever a long jump lands; the unstable-start rule
+        # only where the step can still be halved
         long_step = rel.adaptive and (e_old - e_new) > rel.snap_resolution * de_nom * (1 + 1e-9)
-        step_opts = opts
-        if long_step:
-            # the unstable-start rule only where the step can still be halved
-            step_opts = snap_opts if (e_old - e_new) / 2 >= de_min else snap_opts_last
+        step_opts = opts if not long_step else (
+            snap_opts if (e_old - e_new) / 2 >= de_min else snap_opts_last)
         res = minimize(asm, x_pred, asm.free(x_pred), step_opts,
-                       solver=solver, rng=rng, x_ref=x, watch=watch)
-        totals["newton_iterations"] += res.iterations
-        totals["negative_curvature_steps"] += res.negative_steps
-        totals["assembly_time_s"] += res.times.get("assembly", 0.0)
-        totals["factor_time_s"] += res.times.get("factor", 0.0)
-        totals["eig_time_s"] += res.times.get("eig", 0.0)
-        totals["line_search_time_s"] += res.times.get("line_search", 0.0)
+                       solver=solver, rng=rng, x_ref=w.x, watch=watch)
+        w.count(res)
         # the solver now holds the factorization of this attempt's last Hessian: that of the
         # new equilibrium when it converged
-        chord_ready = res.converged
+        w.chord_ready = res.converged
         if not res.converged:
-            if rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
-                de = (e_old - e_new) / 2
-                totals["step_cuts"] += 1
-                totals["snap_cuts"] += int(res.over_budget)
-                totals["unstable_start_cuts"] += int(res.unstable_start)
-                steps.append((e_old, e_old - de))
-                continue
-            raise ConvergenceError(
-                f"release step {len(history)} (release strain {eps0 - e_new:.4g}): "
-                f"{res.message}",
-                step=len(history), residual=res.residual, release_strain=eps0 - e_new,
-            )
-        x_prev, e_prev = x, e_old
-        x = asm.full(res.u, x_pred)
-        e = e_new
-        e_measured = bd.strain(e, x)
-        rec = dict(step=len(history), release_strain=eps0 - e_measured, clamp_strain=e_measured,
-                   energy=res.energy, **_heights(sim, x),
-                   newton_iterations=res.iterations, negative_steps=res.negative_steps,
-                   rod_negative_steps=res.watched_steps, residual=res.residual)
-        history.append(rec)
+            _cut(w, res, e_old, e_new, de_min, eps0, rel.adaptive)
+            continue
+        w.x_prev, w.e_prev = w.x, e_old
+        w.x, w.e = asm.full(res.u, x_pred), e_new
+        rec = _record(sim, bd, w, res, eps0)
         if progress is not None:
-            progress((eps0 - e) / (eps0 - e_end), rec)
-        if e <= e_end:
+            progress((eps0 - w.e) / (eps0 - e_end), rec)
+        if w.e <= e_end:
             break
-        # buckled: a step needed negative curvature (a bifurcation), or the rods stand out of
-        # the plane by more than twice their thickness (an imperfect, smooth onset; the curl
-        # of the bilayer before buckling is a fraction of h)
-        buckled = (buckled or res.negative_steps > 0
-                   or any(dk > BUCKLED_DEFLECTION * sk.h for dk, sk in
-                          zip(rec["rod_max_deflection"], sim.sections, strict=True)))
-        de = _next_increment(de, de_nom, rel.max_step_factor, buckled, res, rel.onset_substeps)
-    totals["release_steps"] = len(history) - 1
-    totals["converged"] = True
-    totals["linear_solver"] = solver.name
-    totals["final_residual"] = history[-1]["residual"]
-    return x, history, totals
+        w.buckled = _buckled(w.buckled, res, rec, sim)
+        w.de = _next_increment(w.de, de_nom, rel.max_step_factor, w.buckled, res,
+                               rel.onset_substeps)
+    w.totals.update(release_steps=len(w.history) - 1, converged=True,
+                    linear_solver=solver.name, final_residual=w.history[-1]["residual"])
+    return w.x, w.history, w.totals
+
+
+def _record(sim: Simulation, bd: Boundary, w: _Walk, res, eps0: float) -> dict:
+    """The history entry of the equilibrium just reached (appended to ``w.history``)."""
+    e_measured = bd.strain(w.e, w.x)
+    rec = dict(step=len(w.history), release_strain=eps0 - e_measured, clamp_strain=e_measured,
+               energy=res.energy, **rod_heights(sim, w.x),
+               newton_iterations=res.iterations, negative_steps=res.negative_steps,
+               rod_negative_steps=res.watched_steps, residual=res.residual)
+    w.history.append(rec)
+    return rec
+
+
+def _buckled(already: bool, res, rec: dict, sim: Simulation) -> bool:
+    """Buckled: a step needed negative curvature (a bifurcation), or the rods stand out of
+    the plane by more than twice their thickness (an imperfect, smooth onset; the curl of
+    the bilayer before buckling is a fraction of h)."""
+    return (already or res.negative_steps > 0
+            or any(dk > BUCKLED_DEFLECTION * sk.h for dk, sk in
+                   zip(rec["rod_max_deflection"], sim.sections, strict=True)))

@@ -26,11 +26,12 @@ import numpy as np
 
 from ..mechanics.assemble import ElementGroup
 from ..mechanics.build import edge_tension_group, fabric_groups, rod_groups
+from ..mechanics.fabric import dead_load
 
 if TYPE_CHECKING:
-    from .release import Simulation
+    from .simulation import Simulation
 
-__all__ = ["EnergyTerm", "TermState", "TERMS", "groups"]
+__all__ = ["ModelTerm", "TermState", "TERMS", "groups"]
 
 Stage = Literal["prestretch", "print"]
 
@@ -45,9 +46,10 @@ class TermState:
 
 
 @dataclass(frozen=True)
-class EnergyTerm:
-    """One energy term: ``build(sim, state)`` returns its element groups (empty when the term
-    is off for this case)."""
+class ModelTerm:
+    """One energy term of the model: ``build(sim, state)`` returns its element groups (the
+    assembler's :class:`undulate.mechanics.assemble.EnergyTerm`; empty when the term is off
+    for this case)."""
 
     name: str
     acts_from: Stage
@@ -74,24 +76,22 @@ def _rods(sim: Simulation, state: TermState) -> list[ElementGroup]:
 
 
 def _weight(sim: Simulation, state: TermState) -> list[ElementGroup]:
-    from .dynamics import gravity_group
-
     loaded = np.ones(sim.mesh.n_nodes, bool) if state.loaded is None else state.loaded
     g = gravity_group(sim, loaded)
     return [g] if g is not None else []
 
 
 #: the model's energy terms, in the order their groups are assembled
-TERMS: tuple[EnergyTerm, ...] = (
-    EnergyTerm("fabric", "prestretch", _fabric),  # membrane (neo-Hookean or orthotropic) + bending
-    EnergyTerm("edge_tension", "prestretch", _edge_tension),  # fabric.edge_tension
-    EnergyTerm("rods", "print", _rods),  # stretch, bending and twist, footprint on the fabric
-    EnergyTerm("gravity", "print", _weight),  # [gravity]: weight of fabric and rods
+TERMS: tuple[ModelTerm, ...] = (
+    ModelTerm("fabric", "prestretch", _fabric),  # membrane (neo-Hookean or orthotropic) + bending
+    ModelTerm("edge_tension", "prestretch", _edge_tension),  # fabric.edge_tension
+    ModelTerm("rods", "print", _rods),  # stretch, bending and twist, footprint on the fabric
+    ModelTerm("gravity", "print", _weight),  # [gravity]: weight of fabric and rods
 )
 
 
 def groups(sim: Simulation, stages: tuple[Stage, ...], state: TermState | None = None,
-           terms: tuple[EnergyTerm, ...] = TERMS) -> list[ElementGroup]:
+           terms: tuple[ModelTerm, ...] = TERMS) -> list[ElementGroup]:
     """Element groups of the ``terms`` that act from one of ``stages``, in their order."""
     st = state or TermState()
     out: list[ElementGroup] = []
@@ -99,3 +99,35 @@ def groups(sim: Simulation, stages: tuple[Stage, ...], state: TermState | None =
         if term.acts_from in stages:
             out += term.build(sim, st)
     return out
+
+
+def lumped_masses(sim) -> np.ndarray:
+    """Node masses [t] of fabric and rods."""
+    mesh, case = sim.mesh, sim.case
+    X = mesh.X
+    tri = mesh.tris
+    A0 = 0.5 * np.abs(
+        (X[tri[:, 1], 0] - X[tri[:, 0], 0]) * (X[tri[:, 2], 1] - X[tri[:, 0], 1])
+        - (X[tri[:, 1], 1] - X[tri[:, 0], 1]) * (X[tri[:, 2], 0] - X[tri[:, 0], 0])
+    )
+    m = np.zeros(mesh.n_nodes)
+    for c in range(3):
+        m += np.bincount(tri[:, c], weights=case.fabric.rho * case.fabric.t * A0 / 3.0,
+                         minlength=mesh.n_nodes)
+    for ch, sec, path in zip(mesh.rods, sim.sections, case.rod_paths(), strict=True):
+        seg = path.length / max(ch.n_nodes - 1, 1)  # nodes are equally spaced along the rod
+        ln = np.full(ch.n_nodes, seg)
+        ln[[0, -1]] = 0.5 * seg
+        m[ch.p] += case.rods.rho_B * sec.b * sec.h * ln
+    return m
+
+
+def gravity_group(sim, free: np.ndarray) -> ElementGroup | None:
+    """The weight of fabric and rods (lumped masses times ``case.gravity.g``) on the free
+    nodes, or None when gravity is off."""
+    grav = sim.case.gravity
+    if not grav.on:
+        return None
+    nodes = np.nonzero(free)[0]
+    w = lumped_masses(sim)[nodes, None] * np.asarray(grav.g, dtype=float)[None, :]
+    return ElementGroup("gravity", dead_load, nodes[:, None], (w,))

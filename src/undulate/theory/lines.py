@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..model.config import MATERIAL_DEFAULTS
+from ..model.families import decide_family
 from ..model.pattern import Line, line_gap
 from . import model as T
 
@@ -98,7 +99,7 @@ def predict_lines(lines: list[Line], *, h: float, eps0: float, b: float = MATERI
                      f"estimated as {eps:.3g} (the model is derived for lines along x)")
         if eps <= 0.0:
             w.append("stretched, not compressed, on release: it stays flat")
-            rec.update(n=0, l=None, l_n=None, a=None, R=None, s_hat=0.0, family="flat")
+            rec.update(n=0, l=None, l_n=None, a=None, R=None, s_hat=0.0, family=decide_family(0))
             reach.append(0.0)
             per.append(rec)
             continue
@@ -121,8 +122,8 @@ def predict_lines(lines: list[Line], *, h: float, eps0: float, b: float = MATERI
         live = [i for i in members if per[i]["n"]]
         if len(members) == 1 or not live:
             i = members[0]
-            fam = per[i].get("family") or ("single" if per[i]["n"] > 1 else _one_arc_family(
-                per[i]))
+            fam = per[i].get("family") or (decide_family(per[i]["n"]) if per[i]["n"] > 1
+                                           else _one_arc_family(per[i]))
             rec_g.update(s=None, family=fam)
         else:
             near = [min(gaps.get((min(i, j), max(i, j)), math.inf) for j in members if j != i)
@@ -156,6 +157,6 @@ def predict_lines(lines: list[Line], *, h: float, eps0: float, b: float = MATERI
 
 
 def _one_arc_family(rec: dict[str, Any]) -> str:
-    """rolls or bends for a lone line with one half-wave (the phase map's rule)."""
+    """rolls or bends for a lone line with one half-wave (the one rule of the families)."""
     lam1, a1 = T.single_arc(rec["L"], rec["R"])
-    return "rolls" if float(lam1) < 2.0 * float(a1) else "bends"
+    return decide_family(1, lam=float(lam1), a=float(a1))

@@ -42,6 +42,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..model.config import MATERIAL_DEFAULTS
+from ..model.families import FAMILIES as ALL_FAMILIES
+from ..model.families import decide_family
 
 __all__ = [
     "DEFAULTS",
@@ -66,14 +68,20 @@ __all__ = [
 #: b [mm], rod modulus E_B [MPa], fabric modulus E [MPa], fabric thickness t [mm].
 DEFAULTS: dict[str, float] = dict(MATERIAL_DEFAULTS)
 
-#: Shape families predicted by :func:`phase_map`, in the order of their integer ``code``.
-FAMILIES: tuple[str, ...] = ("coherent", "independent", "rolls", "bends")
+#: Shape families predicted by :func:`phase_map`, in the order of their integer ``code`` (the
+#: first four of :data:`undulate.model.families.FAMILIES`, same codes)
+FAMILIES: tuple[str, ...] = ALL_FAMILIES[:4]
 
 
 def _ret(x: NDArray[Any]) -> Any:
     """Return a Python scalar for 0-d results, the array otherwise."""
     x = np.asarray(x)
     return x.item() if x.ndim == 0 else x
+
+
+_decide = np.vectorize(
+    lambda n_, lam_, a_, coh_: decide_family(int(n_), lam=float(lam_), a=float(a_),
+                                             coherent=bool(coh_)), otypes=[object])
 
 
 def _arr(x: ArrayLike) -> NDArray[np.float64]:
@@ -294,8 +302,8 @@ def phase_map(
     lam1, a1 = single_arc(L, R(hh, eps0, **mat))
     lam1 = _arr(lam1)
     a1 = _arr(a1)
-    code = np.asarray(np.where(ss > sh, 1, 0))
-    code = np.asarray(np.where(n_eff == 1, np.where(lam1 < 2.0 * a1, 2, 3), code))
+    decided = _decide(n_eff, lam1, a1, ss <= sh)  # one rule: model.families.decide_family
+    code = np.asarray(np.vectorize(FAMILIES.index, otypes=[int])(decided))
     family = np.asarray(FAMILIES)[code]
     return {
         "h": hh,

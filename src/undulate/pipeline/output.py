@@ -9,192 +9,23 @@ Directory layout written by :func:`write_result`::
     DIR/centerlines.npz    rod0, rod1, ...: final centre lines (m, 3) [mm], rods ordered by y
     DIR/metrics.json       inputs, solver statistics, history, seed, version, per-rod results
     DIR/rod_<k>_side.png   z along x of each rod's centre line
-    DIR/rod_<k>_fits.png   the sine and arc-chain fits (written by :func:`undulate.api.run_case`)
+    DIR/rod_<k>_fits.png   the sine and arc-chain fits (written by pipeline.run_case)
     DIR/top_view.png       the sheet near the rods from above, coloured by height
     DIR/view_3d.png        the final shape near the rods in 3D, coloured by height
 
-A run never leaves a half-written ``DIR``: :class:`StagedDir` makes a hidden sibling folder
-``.DIR.incomplete-XXXX``, every file is written there, and only when all are complete is it
-renamed to ``DIR`` (one atomic rename). A run that is interrupted (Ctrl-C, kill, power loss)
-leaves ``DIR`` as it was, plus at most the hidden ``.incomplete-`` folder, which no reader
-accepts. :func:`check_destination` refuses, before anything is simulated, an ``--out`` that is a
-file, that cannot be created, or that already holds files (unless ``overwrite``: then the
-previous run's files, and only those, are replaced).
+The folder is written whole or not at all (:class:`undulate.fileio.StagedDir`).
 """
 
 from __future__ import annotations
 
-import glob
-import os
-import re
-import shutil
-import socket
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from ..fileio import atomic_write_json, default_mode, jsonable
+from ..fileio import atomic_write_json, jsonable
 
-__all__ = [
-    "write_result",
-    "rod_summary",
-    "OutputError",
-    "StagedDir",
-    "check_destination",
-    "is_run_file",
-    "INCOMPLETE_TAG",
-]
-
-INCOMPLETE_TAG = ".incomplete-"
-"""Part of the name of a run folder still being written (see :class:`StagedDir`)."""
-
-_RUN_FILE = re.compile(
-    r"(final\.vtu|printed\.vtu|centerlines\.npz|metrics\.json|rod_\d+_(side|fits)\.png"
-    r"|top_view\.png|view_3d\.png)"
-)
-
-
-class OutputError(Exception):
-    """The output folder cannot be used; the message is one line that names it."""
-
-
-def is_run_file(name: str) -> bool:
-    """True for the names of files a run writes (see the module docstring)."""
-    return _RUN_FILE.fullmatch(name) is not None
-
-
-def _nearest_existing(p: Path) -> Path:
-    while not os.path.lexists(p) and p != p.parent:
-        p = p.parent
-    return p
-
-
-def check_destination(out: str | Path, overwrite: bool = False) -> None:
-    """Raise :class:`OutputError` (one line) if a run cannot be written to ``out``.
-
-    Refused: ``out`` exists and is not a folder; a parent of it is a file; ``out`` holds files
-    and ``overwrite`` is false; with ``overwrite``, ``out`` holds anything that is not a run's
-    output (those files would be lost). Writability is checked by :class:`StagedDir`.
-    """
-    out = Path(out)
-    if os.path.lexists(out):
-        if not out.is_dir():
-            raise OutputError(f"output folder {out}: exists and is not a folder")
-        entries = sorted(e.name for e in out.iterdir())
-        if entries and not overwrite:
-            shown = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
-            raise OutputError(
-                f"output folder {out} is not empty ({shown}): give a new folder, or "
-                "--overwrite to replace the previous run in it"
-            )
-        foreign = [e for e in entries if not is_run_file(e)]
-        if foreign:
-            shown = ", ".join(foreign[:3]) + (", ..." if len(foreign) > 3 else "")
-            raise OutputError(
-                f"output folder {out}: --overwrite replaces only a previous run's files, but "
-                f"it also holds {shown}; move them or give another folder"
-            )
-    else:
-        anc = _nearest_existing(out.parent)
-        if not anc.is_dir():
-            raise OutputError(f"output folder {out}: {anc} is a file, not a folder")
-
-
-#: a staging folder's name says who writes it: this host and the writing process's id
-_HOST = re.sub(r"[^A-Za-z0-9_.]", "_", socket.gethostname())[:40] or "host"
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # someone else's process
-        return True
-    return True
-
-
-def remove_stale_staging(parent: Path, name: str) -> list[Path]:
-    """Delete the staging folders of ``name`` left in ``parent`` by killed runs: those written
-    by a process of this host that no longer exists (a run killed with SIGKILL, or a machine
-    that went down, cannot clean up after itself). Folders of live processes, of other hosts
-    (a shared file system) or without an owner in their name are left alone."""
-    removed = []
-    pat = re.compile(re.escape(f".{name}{INCOMPLETE_TAG}{_HOST}-") + r"(\d+)-")
-    for p in parent.glob(f".{glob.escape(name)}{INCOMPLETE_TAG}*"):
-        m = pat.match(p.name)
-        if m and p.is_dir() and not _alive(int(m.group(1))):
-            shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
-    return removed
-
-
-class StagedDir:
-    """A run folder written in a hidden sibling and renamed into place when complete.
-
-    ``StagedDir(out, overwrite)`` checks the destination and creates the staging folder at
-    once (so a destination that cannot be written is reported before any simulation);
-    :attr:`path` is where to write; :meth:`commit` moves it to ``out``; :meth:`discard` (also
-    on leaving a ``with`` block by an exception) deletes it.
-    """
-
-    def __init__(self, out: str | Path, overwrite: bool = False) -> None:
-        self.out = Path(out)
-        self.overwrite = overwrite
-        check_destination(self.out, overwrite)
-        self._abs = Path(os.path.abspath(self.out))
-        parent = self._abs.parent
-        try:
-            parent.mkdir(parents=True, exist_ok=True)
-            remove_stale_staging(parent, self._abs.name)
-            owner = f"{_HOST}-{os.getpid()}"
-            tmp = tempfile.mkdtemp(prefix=f".{self._abs.name}{INCOMPLETE_TAG}{owner}-",
-                                   dir=parent)
-            os.chmod(tmp, default_mode(directory=True))  # mkdtemp makes 0700
-        except OSError as err:
-            raise OutputError(
-                f"output folder {self.out}: cannot write there ({err.strerror or err})"
-            ) from None
-        self.path = Path(tmp)
-        self.committed = False
-
-    def commit(self) -> Path:
-        """Move the complete run into place (replacing a previous run with ``overwrite``)."""
-        dest = self._abs
-        trash = None
-        if os.path.lexists(dest):
-            check_destination(dest, self.overwrite)  # again: something may have appeared
-            if any(dest.iterdir()):
-                trash = dest.parent / f".{dest.name}.previous-{os.getpid()}"
-                os.rename(dest, trash)
-            else:
-                os.rmdir(dest)
-        os.rename(self.path, dest)
-        self.committed = True
-        if trash is not None:
-            shutil.rmtree(trash, ignore_errors=True)
-        try:  # make the rename durable (best effort)
-            fd = os.open(dest.parent, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-        except OSError:
-            pass
-        return self.out
-
-    def discard(self) -> None:
-        if not self.committed:
-            shutil.rmtree(self.path, ignore_errors=True)
-
-    def __enter__(self) -> StagedDir:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is not None:
-            self.discard()
+__all__ = ["write_result", "rod_summary"]
 
 
 def rod_summary(cl: np.ndarray, offset: float) -> dict:
