@@ -60,6 +60,9 @@ class Location:
     n: int
     alternatives: list[tuple[str, int]]  # other (family, n) among the grid neighbours
     distance: float  # to the nearest point, in grid steps
+    l: float = math.nan  # the nearest point's mean l, lam, a [mm]
+    lam: float = math.nan
+    a: float = math.nan
 
     @property
     def confidence(self) -> str:
@@ -206,4 +209,5 @@ def locate(atlas: Atlas, *, h: float, s: float, **case: float) -> Location:
                   - {here})
     return Location(inside=not reasons, reason="; ".join(reasons), h=float(near["h"]),
                     s=float(near["s"]), family=here[0], n=here[1], alternatives=alts,
-                    distance=float(dist.iloc[k]))
+                    distance=float(dist.iloc[k]), l=float(near["l"]), lam=float(near["lam"]),
+                    a=float(near["a"]))

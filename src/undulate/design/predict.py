@@ -93,23 +93,20 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
                 continue
             s = float(atlas.points["s"].iloc[0]) if single else r.s
             loc = locate(atlas, h=r.h, s=s, N=r.N, **fixed)
-            if best is None or (loc.inside and not best[0].inside):
-                best = (loc, atlas)
-    if best is not None and (best[0].inside or source == "simulation"):
-        loc, atlas = best
-        p = atlas.points
-        row = p[(p["h"] == loc.h) & (p["s"] == loc.s)].iloc[0]
+            if best is None or (loc.inside and not best.inside):
+                best = loc
+    if best is not None and (best.inside or source == "simulation"):
+        loc = best
         if not loc.inside:
             warnings.append(f"outside the simulated data ({loc.reason}): the nearest point")
-        rod = {"n": int(row["n"]), "l": float(row["l"]), "lam": float(row["lam"]),
-               "a": float(row["a"])}
+        rod = {"n": loc.n, "l": loc.l, "lam": loc.lam, "a": loc.a}
         return {"source": "simulation", "family": loc.family, "confidence": loc.confidence,
                 "summary": loc.summary(), "alternatives": [
                     {"family": f, "n": n} for f, n in loc.alternatives],
                 "warnings": warnings,
                 "rods": [{"index": k, **rod} for k in range(n_rods)]}
     if best is not None and source == "auto":
-        warnings.append(f"outside the simulated data ({best[0].reason}): eq. (1) and the "
+        warnings.append(f"outside the simulated data ({best.reason}): eq. (1) and the "
                         "phase map of the analytical model, which do not know the end "
                         "effects of a finite rod or the families")
     th = _theory(case)
