@@ -174,3 +174,17 @@ def test_every_toml_example_of_the_patterns_doc_is_a_valid_case() -> None:
     assert len(blocks) >= 4
     for block in blocks:
         case_from_dict(tomllib.loads(textwrap.dedent(block)))
+
+
+def test_cases_saved_before_the_arrays_rename_still_load() -> None:
+    """Cases written before [[pattern.families]] became [[pattern.arrays]] hold an empty
+    "families" list (metrics.json, study records): they load; a non-empty one is refused with
+    the new name (docs/errors.md)."""
+    from undulate.model import ConfigError, case_from_dict
+
+    line = {"id": "a", "points": [[0.0, 0.0], [30.0, 0.0]]}
+    case = case_from_dict({"pattern": {"lines": [line], "families": []}})
+    assert [p.id for p in case.rod_paths()] == ["a"]
+    with pytest.raises(ConfigError, match=r"pattern.families: renamed arrays"):
+        case_from_dict({"pattern": {"lines": [line],
+                                    "families": [{"length": 20.0, "count": 1}]}})

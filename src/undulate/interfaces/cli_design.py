@@ -37,7 +37,9 @@ def design(
     s_min: Annotated[float, typer.Option("--s-min", help="smallest allowed gap, mm")] = 0.0,
     s_max: Annotated[float, typer.Option("--s-max", help="largest allowed gap, mm")] = 50.0,
     family: Annotated[str | None, typer.Option(
-        "--family", help="the group's wanted family: coherent or independent (N >= 2)")] = None,
+        "--family", "--phase",
+        help="the group's wanted family: coherent or independent (N >= 2; --phase: its "
+        "former name)")] = None,
     do_refine: Annotated[bool, typer.Option(
         "--refine", help="correct h with simulations (the real engine, seconds to minutes "
         "each)")] = False,

@@ -216,8 +216,12 @@ class Pattern(_Strict):
     @classmethod
     def _renamed(cls, data: Any) -> Any:
         if isinstance(data, dict) and "families" in data:
-            raise ValueError("families: renamed arrays: write [[pattern.arrays]] (parallel "
-                             "straight lines side by side)")
+            if data["families"]:
+                raise ValueError("families: renamed arrays: write [[pattern.arrays]] "
+                                 "(parallel straight lines side by side)")
+            # an empty list: what cases saved before the rename hold (metrics.json, study
+            # records); nothing to carry over
+            data = {k: v for k, v in data.items() if k != "families"}
         return data
 
     min_gap: float = Field(

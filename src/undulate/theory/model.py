@@ -79,9 +79,11 @@ def _ret(x: NDArray[Any]) -> Any:
     return x.item() if x.ndim == 0 else x
 
 
+#: the family rule on arrays; any n but one half-wave (also an undefined n) counts as many
 _decide = np.vectorize(
-    lambda n_, lam_, a_, coh_: decide_family(int(n_), lam=float(lam_), a=float(a_),
-                                             coherent=bool(coh_)), otypes=[object])
+    lambda n_, lam_, a_, coh_: decide_family(1 if n_ == 1 else 2, lam=float(lam_),
+                                             a=float(a_), coherent=bool(coh_)),
+    otypes=[object])
 
 
 def _arr(x: ArrayLike) -> NDArray[np.float64]:
