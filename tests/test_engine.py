@@ -147,13 +147,13 @@ def test_prestretch_is_flat_unfolded_and_quick():
     """The stretched fabric on which rods are printed is the in-plane equilibrium with no
     folded triangle (a folded one stores hinge energy: its dihedral angle is pi)."""
     from undulate.mechanics.assemble import Assembly
-    from undulate.solve import release
+    from undulate.solve import boundary, release
     from undulate.solve.newton import NewtonOptions
 
     sim = release.prepare(api.demo_case())
     x, pre = release.prestretch(sim, NewtonOptions(force_scale=sim.force_scale))
     assert pre["iterations"] <= 6
-    assert (release._signed_areas(sim.mesh.tris, x) > 0).all()
+    assert (boundary._signed_areas(sim.mesh.tris, x) > 0).all()
     fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
     asm = Assembly(sim.mesh.n_nodes, sim.fabric, fixed)
     assert asm.energy_by_group(x)["fabric_bending"] < 1e-9

@@ -38,7 +38,14 @@ from ..mechanics.assemble import Assembly, ElementGroup
 from ..mechanics.build import rod_centrelines
 from ..mechanics.fabric import dead_load
 from ..model import Case
-from .boundary import Boundary, clamp_positions, clamped_nodes, edge_nodes, make_boundary
+from .boundary import (
+    Boundary,
+    clamp_positions,
+    clamped_nodes,
+    edge_nodes,
+    make_boundary,
+    prestretch,
+)
 from .linear import SingularMatrixError, make_solver, single_threaded_blas
 from .newton import ConvergenceError, NewtonOptions, minimize
 from .simulation import (  # re-exported: a release's inputs and result, by their old address
@@ -57,41 +64,6 @@ __all__ = ["ProgressFn", "Simulation", "SimResult", "prepare", "prestretch", "ru
 
 #: the frame's nodes during the pre-stretch (kept under its old name for the tests and benchmarks)
 _clamped = clamped_nodes
-
-
-def prestretch(sim: Simulation, opts: NewtonOptions) -> tuple[np.ndarray, dict]:
-    """In-plane equilibrium of the fabric stretched by eps0 between the clamps (z = 0)."""
-    eps0 = sim.case.release.eps0
-    # start from the fabric stretched along x only, as the clamps hold it (y = Y): the solve
-    # lets it narrow (3 Newton iterations on the default sheet). Starting from the free strip's
-    # lateral contraction instead puts the elements next to the clamps' corners, held at y = Y,
-    # in a state from which Newton ended with three of them folded over (a mirrored, higher
-    # energy in-plane equilibrium: 427.9 against 418.0 N mm, 16 iterations; measured)
-    rot = sim.rotation
-    x = ((sim.X3 @ rot) * np.array([1.0 + eps0, 1.0, 0.0])) @ rot.T
-    x = clamp_positions(sim, eps0, x)
-    fixed = np.zeros((sim.mesh.n_nodes, 3), dtype=bool)
-    fixed[_clamped(sim)] = True
-    fixed[:, 2] = True
-    asm = Assembly(sim.mesh.n_nodes, sim.fabric, fixed)
-    o = NewtonOptions(**{**opts.__dict__, "require_stable": True, "negative_curvature": False})
-    res = minimize(asm, x, asm.free(x), o)
-    if not res.converged:
-        raise ConvergenceError(f"pre-stretch: {res.message}", step=0, residual=res.residual)
-    x = asm.full(res.u, x)
-    folded = int(np.count_nonzero(_signed_areas(sim.mesh.tris, x) <= 0.0))
-    if folded:
-        raise ConvergenceError(f"pre-stretch: {folded} fabric triangle(s) folded over in the "
-                               "stretched state (not a physical equilibrium)", step=0,
-                               residual=res.residual)
-    return x, {"iterations": res.iterations, "residual": res.residual}
-
-
-def _signed_areas(tris: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Twice the signed in-plane area of each triangle (reference triangles are positive)."""
-    a = x[tris[:, 1], :2] - x[tris[:, 0], :2]
-    b = x[tris[:, 2], :2] - x[tris[:, 0], :2]
-    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
 
 def run_release(case: Case, progress: ProgressFn | None = None, *,
