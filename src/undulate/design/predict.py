@@ -18,7 +18,8 @@ from typing import Any
 
 from .. import theory as T
 from ..model.families import decide_family
-from .atlas import ATLAS_FILE, Atlas, locate, shipped_atlas
+from .atlas import ATLAS_FILE, Atlas, Location, locate, shipped_atlas
+from .scaling import equivalent, load_scaling
 
 __all__ = ["SINGLE_ROD_FILE", "predict_case"]
 
@@ -68,11 +69,14 @@ def arch_rise(length: float, eps0: float) -> float:
 def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
     """Family and per-rod n, l, lam, a of a case (a :class:`undulate.model.Case`).
 
-    ``source``: "auto" (simulated data where the case is inside an atlas, else theory),
-    "simulation" (the nearest simulated point even outside, with the reason in
+    ``source``: "auto" (simulated data where the case is inside an atlas, or carried there
+    by the scaling of :mod:`undulate.design.scaling` when only L and eps0 differ; else
+    theory), "simulation" (the nearest simulated point even outside, with the reason in
     ``warnings``) or "theory" (eq. (1) and the phase map). Returns a JSON-ready dict with
-    ``source``, ``family``, ``confidence``, ``summary``, ``warnings`` and ``rods`` (one entry
-    per rod, in the order of a run's metrics.json: by y).
+    ``source``, ``family``, ``confidence`` ("simulated", "scaled", "near a transition",
+    "outside" or "theory"), ``summary``, ``warnings`` and ``rods`` (one entry per rod, in
+    the order of a run's metrics.json: by y); a scaled answer also has ``scaled`` (the
+    equivalent h and s on the atlas, the length factor and the exponent).
     """
     if source not in SOURCES:
         raise ValueError(f"source: must be one of {', '.join(SOURCES)} (got {source!r})")
@@ -83,28 +87,13 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
         warnings.append("a pattern of lines: the simulated data cover parallel straight rods "
                         "only; theory for the case's [rods] values")
         source = "theory"
-    best = None
-    if source != "theory":
-        fixed = {"L": r.L, "eps0": case.release.eps0, "E_B": r.E_B, "E": case.fabric.E,
-                 "t": case.fabric.t, "b": r.b}
-        for atlas in _atlases():
-            single = atlas.meta.get("N") == 1
-            if single != (r.N == 1):
-                continue
-            s = float(atlas.points["s"].iloc[0]) if single else r.s
-            loc = locate(atlas, h=r.h, s=s, N=r.N, **fixed)
-            if best is None or (loc.inside and not best.inside):
-                best = loc
+    best, scaled = _from_atlases(case) if source != "theory" else (None, None)
     if best is not None and (best.inside or source == "simulation"):
-        loc = best
-        if not loc.inside:
-            warnings.append(f"outside the simulated data ({loc.reason}): the nearest point")
-        rod = {"n": loc.n, "l": loc.l, "lam": loc.lam, "a": loc.a}
-        return {"source": "simulation", "family": loc.family, "confidence": loc.confidence,
-                "summary": loc.summary(), "alternatives": [
-                    {"family": f, "n": n} for f, n in loc.alternatives],
-                "warnings": warnings,
-                "rods": [{"index": k, **rod} for k in range(n_rods)]}
+        if not best.inside:
+            warnings.append(f"outside the simulated data ({best.reason}): the nearest point")
+        return _simulated(best, warnings, n_rods)
+    if scaled is not None:
+        return _scaled_answer(*scaled, case, warnings, n_rods)
     if best is not None and source == "auto":
         warnings.append(f"outside the simulated data ({best.reason}): eq. (1) and the "
                         "phase map of the analytical model, which do not know the end "
@@ -114,3 +103,67 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
     return {"source": "theory", "family": th["family"], "confidence": "theory",
             "summary": f"theory: {th['family']} n = {th['n']}", "alternatives": [],
             "warnings": warnings, "rods": [{"index": k, **rod} for k in range(n_rods)]}
+
+
+def _from_atlases(case: Any) -> tuple[Location | None, tuple | None]:
+    """The best direct location on the atlases of the case's kind (one rod or several), and,
+    when it is outside, the case carried onto an atlas by the scaling: (location, the
+    equivalent h and s, the length factor, eps0 of the atlas), or None."""
+    r, eps0 = case.rods, case.release.eps0
+    mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
+    best: Location | None = None
+    scaled = None
+    for atlas in _atlases():
+        single = atlas.meta.get("N") == 1
+        if single != (r.N == 1):
+            continue
+        s = float(atlas.points["s"].iloc[0]) if single else r.s
+        loc = locate(atlas, h=r.h, s=s, N=r.N, L=r.L, eps0=eps0, **mat)
+        if best is None or (loc.inside and not best.inside):
+            best = loc
+        if not loc.inside and scaled is None:
+            scaled = _scaled_location(atlas, r.h, s, r.L, eps0, single, N=r.N, **mat)
+    return best, scaled
+
+
+def _scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
+                     **fixed: float) -> tuple | None:
+    """The case read off ``atlas`` at the thickness (and gap) with the same scaling variable
+    (:func:`undulate.design.scaling.equivalent`); None if that is outside it too."""
+    m = atlas.meta
+    if "L" not in m or "eps0" not in m:
+        return None
+    p = load_scaling().p
+    h_eq, k = equivalent(h, L, eps0, L_ref=float(m["L"]), eps0_ref=float(m["eps0"]), p=p)
+    s_eq = s if single else s / k
+    loc = locate(atlas, h=h_eq, s=s_eq, L=float(m["L"]), eps0=float(m["eps0"]), **fixed)
+    if not loc.inside:
+        return None
+    return loc, {"h": h_eq, "s": None if single else s_eq, "length_factor": k, "p": p,
+                 "L": float(m["L"]), "eps0": float(m["eps0"])}
+
+
+def _simulated(loc: Location, warnings: list[str], n_rods: int) -> dict[str, Any]:
+    rod = {"n": loc.n, "l": loc.l, "lam": loc.lam, "a": loc.a}
+    return {"source": "simulation", "family": loc.family, "confidence": loc.confidence,
+            "summary": loc.summary(), "alternatives": [
+                {"family": f, "n": n} for f, n in loc.alternatives],
+            "warnings": warnings, "rods": [{"index": k, **rod} for k in range(n_rods)]}
+
+
+def _scaled_answer(loc: Location, sc: dict[str, Any], case: Any, warnings: list[str],
+                   n_rods: int) -> dict[str, Any]:
+    """A located point's answer carried back to the case: lengths by the length factor, lam
+    also by the chord's shortening, the family of one arch decided on the carried shape."""
+    k, eps0 = sc["length_factor"], case.release.eps0
+    lam = loc.lam * k * (1.0 + sc["eps0"]) / (1.0 + eps0)
+    rod = {"n": loc.n, "l": loc.l * k, "lam": lam, "a": loc.a * k}
+    family = decide_family(1, lam=lam, a=rod["a"]) if loc.n == 1 else loc.family
+    where = f"h' = {sc['h']:.3g} mm" + (f", s' = {sc['s']:.3g} mm" if sc["s"] is not None
+                                         else "")
+    out = _simulated(loc, warnings, n_rods)
+    out.update(family=family, rods=[{"index": j, **rod} for j in range(n_rods)],
+               confidence="scaled" if loc.confidence == "simulated" else loc.confidence,
+               summary=f"scaled from the simulated L = {sc['L']:g} mm, eps0 = "
+                       f"{sc['eps0']:g} ({where}): {loc.summary()}", scaled=sc)
+    return out
