@@ -21,7 +21,7 @@ from ..model.families import decide_family
 from .atlas import ATLAS_FILE, Atlas, Location, locate, shipped_atlas
 from .scaling import equivalent, load_scaling
 
-__all__ = ["SINGLE_ROD_FILE", "predict_case"]
+__all__ = ["SINGLE_ROD_FILE", "predict_case", "scaled_location"]
 
 #: the single-rod atlas shipped in the package (from the single-rod-h study)
 SINGLE_ROD_FILE = Path(__file__).with_name("data") / "single_rod.csv"
@@ -122,14 +122,16 @@ def _from_atlases(case: Any) -> tuple[Location | None, tuple | None]:
         if best is None or (loc.inside and not best.inside):
             best = loc
         if not loc.inside and scaled is None:
-            scaled = _scaled_location(atlas, r.h, s, r.L, eps0, single, N=r.N, **mat)
+            scaled = scaled_location(atlas, r.h, s, r.L, eps0, single, N=r.N, **mat)
     return best, scaled
 
 
-def _scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
-                     **fixed: float) -> tuple | None:
-    """The case read off ``atlas`` at the thickness (and gap) with the same scaling variable
-    (:func:`undulate.design.scaling.equivalent`); None if that is outside it too."""
+def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
+                    **fixed: float) -> tuple[Location, dict[str, Any]] | None:
+    """A design read off ``atlas`` at the thickness (and gap) with the same scaling variable
+    (:func:`undulate.design.scaling.equivalent`): (its location there, and ``scaled``: h', s',
+    the length factor, p, the atlas's L and eps0); None if that is outside the atlas too.
+    ``fixed``: N and the moduli, which must be the atlas's."""
     m = atlas.meta
     if "L" not in m or "eps0" not in m:
         return None

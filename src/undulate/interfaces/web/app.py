@@ -251,6 +251,7 @@ def _validation_line(err: RequestValidationError) -> str:
 def _locate_groups(out: dict[str, Any], p: Params) -> None:
     """Each group of parallel lines placed on the simulated phase diagram (``atlas``)."""
     from ...design.atlas import locate, shipped_atlas
+    from ...design.predict import scaled_location
 
     atlas = shipped_atlas()
     by_id = {r["id"]: r for r in out["lines"]}
@@ -265,10 +266,21 @@ def _locate_groups(out: dict[str, Any], p: Params) -> None:
                 "parallel lines")}
             continue
         r0 = live[0]
-        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"],
-                     L=sum(r["L"] for r in live) / len(live), eps0=r0["eps_line"],
-                     E_B=p.E_B, E=p.E, t=p.t, b=r0["b"])
-        g["atlas"] = loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"]}
+        L = sum(r["L"] for r in live) / len(live)
+        fixed = {"N": g["N"], "E_B": p.E_B, "E": p.E, "t": p.t, "b": r0["b"]}
+        loc = locate(atlas, h=r0["h"], s=g["s"], L=L, eps0=r0["eps_line"], **fixed)
+        scaled = None if loc.inside else scaled_location(atlas, r0["h"], g["s"], L,
+                                                          r0["eps_line"], False, **fixed)
+        if scaled is None:
+            g["atlas"] = loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"]}
+            continue
+        # another L or eps0: the design drawn where it sits on the diagram once scaled
+        sloc, sc = scaled
+        g["atlas"] = sloc.to_dict() | {
+            "design_h": sc["h"], "design_s": sc["s"], "scaled": sc,
+            "confidence": "scaled" if sloc.confidence == "simulated" else sloc.confidence,
+            "summary": f"scaled from the simulated L = {sc['L']:g} mm, eps0 = {sc['eps0']:g} "
+                       f"(h' = {sc['h']:.3g} mm, s' = {sc['s']:.3g} mm): {sloc.summary()}"}
 
 
 def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
