@@ -383,12 +383,16 @@ def test_atlas_and_where_a_group_sits(client: TestClient) -> None:
     assert not out["atlas"]["inside"] and "E_B = 3000" in out["atlas"]["summary"]
     one = client.post("/api/predict", json=body | {"lines": five[:1]}).json()["groups"][0]
     assert one["atlas"]["confidence"] == "outside" and "one line alone" in one["atlas"]["summary"]
-    # shorter lines: the group is drawn where it sits once scaled (h' = h L_ref / L, s' the
-    # same way), as undulate predict answers it
+    # shorter lines: the group is drawn where it sits once scaled (h' of the same number of
+    # half-waves on the rod, s' = s L_ref / L), as undulate predict answers it
     half = [{"points": [[-m["L"] / 4, y], [m["L"] / 4, y]]} for y in (-10.0, -5.0, 0.0, 5.0, 10.0)]
     sc = client.post("/api/predict", json=body | {"lines": half, "h": 0.25}).json()["groups"][0]
     at = sc["atlas"]
     assert at["inside"] and at["confidence"] in ("scaled", "near a transition")
-    assert at["design_h"] == pytest.approx(0.5) and at["design_s"] == pytest.approx(8.0)
+    from undulate.design.scaling import load_scaling
+
+    k = load_scaling()  # the rods' own half-wave l0 = c0 + c1 h doubles: the same x
+    h_eq = (2 * (k.c0 + k.c1 * 0.25) - k.c0) / k.c1
+    assert at["design_h"] == pytest.approx(h_eq) and at["design_s"] == pytest.approx(8.0)
     assert at["scaled"]["length_factor"] == pytest.approx(0.5)
     assert "scaled from the simulated L" in at["summary"]

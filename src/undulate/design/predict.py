@@ -135,13 +135,16 @@ def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, sin
     m = atlas.meta
     if "L" not in m or "eps0" not in m:
         return None
-    p = load_scaling().p
-    h_eq, k = equivalent(h, L, eps0, L_ref=float(m["L"]), eps0_ref=float(m["eps0"]), p=p)
+    sc = load_scaling()
+    h_eq, k = equivalent(h, L, eps0, L_ref=float(m["L"]), eps0_ref=float(m["eps0"]), p=sc.p,
+                         c0=sc.c0, c1=sc.c1)
+    if not math.isfinite(h_eq):
+        return None
     s_eq = s if single else s / k
     loc = locate(atlas, h=h_eq, s=s_eq, L=float(m["L"]), eps0=float(m["eps0"]), **fixed)
     if not loc.inside:
         return None
-    return loc, {"h": h_eq, "s": None if single else s_eq, "length_factor": k, "p": p,
+    return loc, {"h": h_eq, "s": None if single else s_eq, "length_factor": k, "p": sc.p,
                  "L": float(m["L"]), "eps0": float(m["eps0"])}
 
 
