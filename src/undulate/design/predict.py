@@ -45,10 +45,10 @@ def _theory(case: Any) -> dict[str, Any]:
     n = int(p["n"])
     fam = str(p.get("family") or decide_family(
         n, lam=r.L / (1 + e0), a=arch_rise(r.L, e0) if n == 1 else None))
-    if r.N > 1 and fam in ("coherent", "independent"):  # bundled rods buckle as one
+    if r.N > 1:  # the group's n (bundled rods buckle as one), the n its family is of
         pm = T.phase_map(r.h, r.s, eps0=e0, L=r.L, N=r.N, **mat)
         n = int(pm["n"].item())
-    l_val = float(p["l_n"]) if n > 1 else r.L
+    l_val = r.L / n
     # each arc's chord shortened as the fabric under it: lam = 2 l / (1 + eps0) (n = 1: the
     # span L / (1 + eps0))
     lam = (2.0 if n > 1 else 1.0) * l_val / (1 + e0)
