@@ -268,7 +268,9 @@ def _locate_groups(out: dict[str, Any], p: Params) -> None:
         r0 = live[0]
         L = sum(r["L"] for r in live) / len(live)
         fixed = {"N": g["N"], "E_B": p.E_B, "E": p.E, "t": p.t, "b": r0["b"]}
-        loc = locate(atlas, h=r0["h"], s=g["s"], L=L, eps0=r0["eps_line"], **fixed)
+        # (N first: the reasons of an outside design name it first)
+        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"], L=L, eps0=r0["eps_line"],
+                     **{k: v for k, v in fixed.items() if k != "N"})
         scaled = None if loc.inside else scaled_location(atlas, r0["h"], g["s"], L,
                                                           r0["eps_line"], False, **fixed)
         if scaled is None:
