@@ -79,12 +79,18 @@ def atomic_path(path: Path) -> Iterator[str]:
         except OSError:
             pass
         raise
-    try:  # make the rename durable too (best effort; not supported everywhere)
-        dfd = os.open(path.parent, os.O_RDONLY)
+    _sync_folder(path.parent)  # make the rename durable too
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync a folder, so that a rename into it survives a power loss (best effort: not
+    supported everywhere)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
         try:
-            os.fsync(dfd)
+            os.fsync(fd)
         finally:
-            os.close(dfd)
+            os.close(fd)
     except OSError:
         pass
 
@@ -244,14 +250,7 @@ class StagedDir:
         self.committed = True
         if trash is not None:
             shutil.rmtree(trash, ignore_errors=True)
-        try:  # make the rename durable (best effort)
-            fd = os.open(dest.parent, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-        except OSError:
-            pass
+        _sync_folder(dest.parent)  # make the rename durable
         return self.out
 
     def discard(self) -> None:
