@@ -4,8 +4,11 @@
     python benchmarks/bench_engine.py --only demo single-0.3 five-0.5-10
     python benchmarks/bench_engine.py --json out.json --markdown out.md
     python benchmarks/bench_engine.py --no-fast     # as without the `fast` extra (no PARDISO)
+    python benchmarks/bench_engine.py --setup bare  # on the engine's defaults (E_B = 3000 MPa)
 
-Cases (default settings unless named):
+Cases (on the studies' reference set-up ``study-2022``, rod modulus E_B = 1000 MPa, unless
+``--setup`` names another; default settings unless named; passes up to the eighteenth in
+docs/benchmarks.md ran on the engine's bare defaults, E_B = 3000 MPa):
 * ``demo``: the case of ``undulate demo``.
 * ``single-<h>``: one rod of thickness h (the default case otherwise), for
   h in 0.08, 0.1, 0.14, 0.2, 0.3, 0.5, 0.8, 1.2, 1.6, 2.0.
@@ -36,19 +39,23 @@ from pathlib import Path
 import numpy as np
 
 from undulate import api
+from undulate.study.named_setups import REFERENCE, named_setup
+from undulate.study.spec import merge_case
 
 SINGLE_H = [0.08, 0.1, 0.14, 0.2, 0.3, 0.5, 0.8, 1.2, 1.6, 2.0]
 FIVE = [(0.1, 0.0), (0.1, 50.0), (2.0, 0.0), (2.0, 50.0), (0.5, 10.0)]
 
 
-def cases() -> dict[str, dict]:
+def cases(setup: str = REFERENCE) -> dict[str, dict]:
+    """The benchmark's cases (nested dicts as in a case file) on the set-up ``setup``."""
     out: dict[str, dict] = {"demo": api.DEMO}
     for h in SINGLE_H:
         out[f"single-{h:g}"] = {"name": f"single-{h:g}", "rods": {"h": h}}
     for h, s in FIVE:
         rods = {"h": h, "N": 1, "b": 5.0} if s == 0 else {"h": h, "N": 5, "s": s}
         out[f"five-{h:g}-{s:g}"] = {"name": f"five-{h:g}-{s:g}", "rods": rods}
-    return out
+    over = named_setup(setup)
+    return {k: merge_case(v, over) for k, v in out.items()}
 
 
 def yardstick() -> float:
@@ -112,12 +119,13 @@ def projection(rows: list[dict], ys: float) -> dict:
     return out
 
 
-def markdown(rows: list[dict], ys0: float, ys1: float, proj: dict) -> str:
+def markdown(rows: list[dict], ys0: float, ys1: float, proj: dict,
+             setup: str = REFERENCE) -> str:
     ys = 0.5 * (ys0 + ys1)
     lines = [
         f"machine: {platform.processor() or platform.machine()}, python "
         f"{platform.python_version()}, {os.cpu_count()} cores; yardstick {ys0:.2f} s before, "
-        f"{ys1:.2f} s after",
+        f"{ys1:.2f} s after; set-up {setup}",
         "",
         "| case | converged | wall [s] | wall / yardstick | unknowns | Newton its "
         "| median its/step | max its/step | factor [s] | assembly [s] | solver | n | l [mm] |",
@@ -149,12 +157,15 @@ def main() -> None:
     ap.add_argument("--markdown")
     ap.add_argument("--no-fast", action="store_true",
                     help="choose linear solvers as an install without the `fast` extra would")
+    ap.add_argument("--setup", default=REFERENCE,
+                    help=f"a shipped set-up the cases run on (default {REFERENCE}; bare: the "
+                         "engine's defaults)")
     a = ap.parse_args()
     if a.no_fast:
         from undulate.solve import linear
 
         linear.pardiso_available = lambda: False  # what `auto` consults
-    all_cases = cases()
+    all_cases = cases(a.setup)
     names = a.only or list(all_cases)
     unknown = [n for n in names if n not in all_cases]
     if unknown:
@@ -168,10 +179,10 @@ def main() -> None:
                           for k, v in r.items()}), flush=True)
     ys1 = yardstick()
     proj = projection(rows, 0.5 * (ys0 + ys1))
-    md = markdown(rows, ys0, ys1, proj)
+    md = markdown(rows, ys0, ys1, proj, a.setup)
     print(md)
     if a.json:
-        Path(a.json).write_text(json.dumps(dict(yardstick=[ys0, ys1], rows=rows,
+        Path(a.json).write_text(json.dumps(dict(yardstick=[ys0, ys1], setup=a.setup, rows=rows,
                                                 projection=proj), indent=1))
     if a.markdown:
         Path(a.markdown).write_text(md + "\n")

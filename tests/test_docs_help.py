@@ -41,6 +41,16 @@ def test_demo_help_states_the_demo_case() -> None:
     text = _help("demo")
     assert f"L = {demo_case().rods.L:g} mm" in text
     assert "L = 60" not in text
+    assert f"E_B = {demo_case().rods.E_B:g} MPa" in text
+
+
+def test_demo_is_on_the_reference_setup() -> None:
+    """The demo shows what the study presets show: every value the reference set-up sets."""
+    from undulate.api import DEMO
+    from undulate.study.named_setups import REFERENCE, named_setup
+    from undulate.study.spec import merge_case
+
+    assert merge_case(DEMO, named_setup(REFERENCE)) == DEMO
 
 
 def test_theory_help_keeps_units() -> None:

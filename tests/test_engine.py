@@ -124,6 +124,16 @@ def test_default_single_rod_buckles_into_waves():
 
 
 @pytest.mark.slow
+def test_demo_newton_iteration_budget():
+    """The demo's whole release in at most 90 Newton iterations (one factorization each, about
+    6 per release step): a regression in the predictor, the step control or the minimiser
+    shows here first. Measured: 86, ending with seven arcs."""
+    r = api.simulate(api.demo_case())
+    assert r.stats["newton_iterations"] <= 90, r.stats["newton_iterations"]
+    assert api.analyse(r)["rods"][0]["n"] == 7
+
+
+@pytest.mark.slow
 def test_mesh_convergence_of_arc_length():
     """The buckled arc length and radius change by < 1 % between two refinements.
 

@@ -136,6 +136,7 @@ def _demo_help() -> str:
 
     c = demo_case()
     return (f"Simulate the default single rod (h = {c.rods.h:g} mm, L = {c.rods.L:g} mm, "
+            f"E_B = {c.rods.E_B:g} MPa as in the studies' reference set-up, "
             f"{c.fabric.margin_y:g} mm of fabric each side, "
             f"{c.release.steps} release steps) and write all outputs.")
 
