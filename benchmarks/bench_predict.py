@@ -78,9 +78,11 @@ def main() -> int:
     wall = time.perf_counter() - t0
     ys1 = yardstick()
     table = collect(args.out).set_index("run_id")
-    lines = ["| case | h | L | eps0 | N | s | simulated | predict | source | theory |",
+    lines = ["| case | h | L | eps0 | N | s | simulated | predict | confidence | theory |",
              "|---|---|---|---|---|---|---|---|---|---|"]
-    hits = {"predict_n": 0, "predict_family": 0, "theory_n": 0, "theory_family": 0}
+    hits = {"predict_n": 0, "predict_family": 0, "theory_n": 0, "theory_family": 0,
+            "predict_n_or_alternative": 0}
+    by_confidence: dict[str, list[int]] = {}  # confidence -> [cases, n right, family right]
     done = 0
     for r, c in zip(runs, cases, strict=True):
         if r.id not in table.index or table.loc[r.id, "status"] != "ok":
@@ -92,11 +94,17 @@ def main() -> int:
         for name, res in (("predict", p), ("theory", t)):
             hits[f"{name}_n"] += int(res["rods"][0]["n"] == sim_n)
             hits[f"{name}_family"] += int(res["family"] == sim_f)
+        alternatives = {a["n"] for a in p.get("alternatives", [])}
+        hits["predict_n_or_alternative"] += int(sim_n in alternatives | {p["rods"][0]["n"]})
+        row = by_confidence.setdefault(p["confidence"], [0, 0, 0])
+        row[0] += 1
+        row[1] += int(p["rods"][0]["n"] == sim_n)
+        row[2] += int(p["family"] == sim_f)
         rods = c["rods"]
         lines.append(f"| {r.params['case']} | {rods['h']:g} | {rods['L']:g} | "
                      f"{c['release']['eps0']:g} | {rods['N']} | "
                      f"{rods['s']:g} | {sim_f} n = {sim_n} | {p['family']} n = "
-                     f"{p['rods'][0]['n']} | {p['source']} | {t['family']} n = "
+                     f"{p['rods'][0]['n']} | {p['confidence']} | {t['family']} n = "
                      f"{t['rods'][0]['n']} |")
     rate = {k: (v / done if done else float("nan")) for k, v in hits.items()}
     ys = 0.5 * (ys0 + ys1)
@@ -104,7 +112,11 @@ def main() -> int:
               f"{wall:.0f} s = {wall / ys:.0f} yardsticks of {ys:.2f} s)",
               f"predict: n {100 * rate['predict_n']:.0f} %, family "
               f"{100 * rate['predict_family']:.0f} %; eq. (1) and the phase map: n "
-              f"{100 * rate['theory_n']:.0f} %, family {100 * rate['theory_family']:.0f} %"]
+              f"{100 * rate['theory_n']:.0f} %, family {100 * rate['theory_family']:.0f} %",
+              f"predict's n or one of its alternatives: "
+              f"{100 * rate['predict_n_or_alternative']:.0f} %",
+              "by predict's confidence (cases, n right, family right): "
+              + "; ".join(f"{k} {v[0]}, {v[1]}, {v[2]}" for k, v in by_confidence.items())]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.markdown:
