@@ -59,3 +59,31 @@ def test_cli_json(tmp_path: Path) -> None:
     assert out["source"] == "simulation" and out["rods"][0]["n"] >= 3
     bad = CliRunner().invoke(app, ["predict", str(tmp_path / "c.toml"), "--source", "x"])
     assert bad.exit_code == 2 and "--source: must be one of" in bad.stderr
+
+
+def test_the_atlas_at_the_nearest_rod_length_answers(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A further atlas CSV in the data folder is read, a case inside it is answered from it
+    directly, and a scaled case from the atlas whose rod length is nearest its own."""
+    from undulate.design import predict
+    from undulate.design.atlas import ATLAS_FILE
+
+    data = tmp_path / "data"
+    data.mkdir()
+    first, rest = ATLAS_FILE.read_text().split("\n", 1)
+    meta = json.loads(first[2:])
+    meta["L"] = 50.0
+    (data / "phase_diagram_L50.csv").write_text("# " + json.dumps(meta) + "\n" + rest)
+    for src in (SINGLE_ROD_FILE, ATLAS_FILE):
+        (data / src.name).write_text(src.read_text())
+    monkeypatch.setattr(predict, "SINGLE_ROD_FILE", data / SINGLE_ROD_FILE.name)
+    monkeypatch.setattr(predict, "ATLAS_FILE", data / ATLAS_FILE.name)
+    assert sorted(a.meta["L"] for a in predict._atlases()) == [50.0, 100.0, 100.0]
+
+    direct = predict_case(_case(N=5, h=0.3, s=10.0, L=50.0))
+    assert direct["source"] == "simulation" and "scaled" not in direct
+    near = predict_case(_case(N=5, h=0.3, s=10.0, L=45.0))
+    assert near["confidence"] in ("scaled", "near a transition")
+    assert near["scaled"]["L"] == 50.0
+    far = predict_case(_case(N=5, h=0.3, s=10.0, L=90.0))
+    assert far["scaled"]["L"] == 100.0

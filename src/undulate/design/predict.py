@@ -29,8 +29,12 @@ SOURCES = ("auto", "simulation", "theory")
 
 
 def _atlases() -> list[Atlas]:
+    """The shipped atlases: the single-rod sweep, the five-rod diagram, then any further
+    atlas CSV in the package's data folder (e.g. a diagram at another rod length)."""
     out = []
-    for path in (SINGLE_ROD_FILE, ATLAS_FILE):
+    more = sorted(p for p in SINGLE_ROD_FILE.parent.glob("*.csv")
+                  if p not in (SINGLE_ROD_FILE, ATLAS_FILE))
+    for path in (SINGLE_ROD_FILE, ATLAS_FILE, *more):
         try:
             out.append(shipped_atlas(path))
         except (OSError, ValueError):
@@ -108,11 +112,13 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
 def _from_atlases(case: Any) -> tuple[Location | None, tuple | None]:
     """The best direct location on the atlases of the case's kind (one rod or several), and,
     when it is outside, the case carried onto an atlas by the scaling: (location, the
-    equivalent h and s, the length factor, eps0 of the atlas), or None."""
+    equivalent h and s, the length factor, eps0 of the atlas), or None. Of several atlases
+    that can take the scaled case, the one simulated at the rod length nearest the case's
+    (ratio) answers: the scaling carries it the shortest way."""
     r, eps0 = case.rods, case.release.eps0
     mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
     best: Location | None = None
-    scaled = None
+    scaled: list[tuple[float, tuple]] = []
     for atlas in _atlases():
         single = atlas.meta.get("N") == 1
         if single != (r.N == 1):
@@ -121,9 +127,11 @@ def _from_atlases(case: Any) -> tuple[Location | None, tuple | None]:
         loc = locate(atlas, h=r.h, s=s, N=r.N, L=r.L, eps0=eps0, **mat)
         if best is None or (loc.inside and not best.inside):
             best = loc
-        if not loc.inside and scaled is None:
-            scaled = scaled_location(atlas, r.h, s, r.L, eps0, single, N=r.N, **mat)
-    return best, scaled
+        carried = None if loc.inside else scaled_location(atlas, r.h, s, r.L, eps0, single,
+                                                           N=r.N, **mat)
+        if carried is not None:
+            scaled.append((abs(math.log(r.L / float(atlas.meta["L"]))), carried))
+    return best, (min(scaled, key=lambda c: c[0])[1] if scaled else None)
 
 
 def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
