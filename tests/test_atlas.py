@@ -70,3 +70,25 @@ def test_the_shipped_atlas_loads() -> None:
     assert atlas.meta["N"] == 5 and atlas.meta["points"] == len(atlas.points) > 0
     assert set(atlas.points["family"]) <= {"coherent", "independent", "rolls", "bends",
                                            "waves", "flat"}
+
+
+def test_a_sweep_over_h_and_s_makes_an_atlas_and_others_are_refused(tmp_path: Path) -> None:
+    """`undulate study atlas` takes a SWEEP.toml study that sweeps rods.h / rods.s (and the
+    seed) only, e.g. the diagram at another rod length, and refuses one that sweeps anything
+    else, naming it."""
+    from typer.testing import CliRunner
+
+    from undulate.interfaces.cli import app
+
+    studies = Path(__file__).resolve().parents[1] / "docs" / "studies" / "rare-modes"
+    runner = CliRunner()
+    ok = runner.invoke(app, ["study", "atlas", str(studies / "study-five"),
+                             "--out", str(tmp_path / "five.csv")])
+    assert ok.exit_code == 0, ok.output
+    atlas = load_atlas(tmp_path / "five.csv")
+    assert atlas.meta["N"] == 5 and sorted(atlas.points["s"]) == [17.5, 20.0]
+    bad = runner.invoke(app, ["study", "atlas", str(studies / "study-printed-reference"),
+                              "--out", str(tmp_path / "printed.csv")])
+    assert bad.exit_code != 0
+    assert "imperfection.amplitude" in bad.output and "Traceback" not in bad.output
+    assert not (tmp_path / "printed.csv").exists()

@@ -406,10 +406,15 @@ def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")
     _out.print(str(write_report(directory)), highlight=False, soft_wrap=True)
 
 
+#: what a SWEEP.toml study may sweep to make an atlas (one row per h, s)
+_ATLAS_SWEEP = frozenset({"rods.h", "rods.s", "imperfection.seed"})
+
+
 @study_app.command("atlas")
 def atlas_cmd(
     directory: Annotated[Path, typer.Argument(
-        help="a study directory (parallel-phase-diagram or single-rod-h), or its table.csv")],
+        help="a study directory (parallel-phase-diagram, single-rod-h, or a sweep over "
+             "rods.h and rods.s only), or its table.csv")],
     out: Annotated[Path, typer.Option("--out", help="atlas CSV to write")],
 ) -> None:
     """A study's results as an atlas for designs (one row per (h, s): family, n, l, lam, a).
@@ -417,7 +422,9 @@ def atlas_cmd(
     The package ships two (undulate.design.atlas, undulate predict): remake them with
     undulate study atlas DIR --out src/undulate/design/data/phase_diagram.csv (the diagram)
     and undulate study atlas docs/studies/single-rod-h/table.csv --out
-    src/undulate/design/data/single_rod.csv
+    src/undulate/design/data/single_rod.csv. A SWEEP.toml study that sweeps rods.h and
+    rods.s (and the seed) only, e.g. the diagram at another rod length, makes one too;
+    predict reads every atlas CSV in that data folder.
     """
     import pandas as pd
 
@@ -428,9 +435,13 @@ def atlas_cmd(
         table, setup = pd.read_csv(directory), None
     elif (directory / "runs").is_dir():
         meta = read_study(directory) or {}
-        if meta.get("name") not in ("parallel-phase-diagram", "single-rod-h"):
+        swept = set((meta.get("definition") or {}).get("sweep") or {})
+        atlas_sweep = meta.get("kind") == "sweep" and swept and swept <= _ATLAS_SWEEP
+        if meta.get("name") not in ("parallel-phase-diagram", "single-rod-h") and not atlas_sweep:
             _fail(f"{directory}: an atlas is made from a parallel-phase-diagram or "
-                  f"single-rod-h study (this one is {meta.get('name')!r})")
+                  f"single-rod-h study, or a sweep over {', '.join(sorted(_ATLAS_SWEEP))} "
+                  f"only (this one is {meta.get('name')!r}"
+                  + (f", sweeping {', '.join(sorted(swept))})" if swept else ")"))
         table, setup = collect(directory), meta.get("definition", {}).get("setup")
     else:
         _fail(f"{directory}: not a study directory (no runs/) nor a table .csv")
