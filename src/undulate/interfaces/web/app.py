@@ -267,12 +267,12 @@ def _locate_groups(out: dict[str, Any], p: Params) -> None:
             continue
         r0 = live[0]
         L = sum(r["L"] for r in live) / len(live)
-        fixed = {"N": g["N"], "E_B": p.E_B, "E": p.E, "t": p.t, "b": r0["b"]}
+        mat = {"E_B": p.E_B, "E": p.E, "t": p.t, "b": r0["b"]}
         # (N first: the reasons of an outside design name it first)
-        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"], L=L, eps0=r0["eps_line"],
-                     **{k: v for k, v in fixed.items() if k != "N"})
+        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"], L=L, eps0=r0["eps_line"], **mat)
         scaled = None if loc.inside else scaled_location(atlas, r0["h"], g["s"], L,
-                                                          r0["eps_line"], False, **fixed)
+                                                          r0["eps_line"], False, N=g["N"],
+                                                          **mat)
         if scaled is None:
             g["atlas"] = loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"]}
             continue
