@@ -5,9 +5,10 @@
 Reads docs/studies/parallel-phase-diagram/table.csv and
 docs/studies/single-rod-eps0-long/table.csv (no simulation) and prints: the families of the
 five-rod runs, how often an outer rod reaches the onset first, the runs whose rods disagree
-on n, the far corner's shallow inner rods, h* (the first h with n = 1) per gap, the master curve's bands of l below h / h* = 1,
-lam / 2a of every one-arch rod, and the long rod's take-up of the release (lam / 2l =
-1 / (1 + eps_rod)) with the exponents of l against eps0 and against eps_rod.
+on n, the far corner's shallow inner rods, h* (the first h with n = 1) per gap, the master
+curve's bands of l below h / h* = 1, lam / 2a of every one-arch rod, and the long rod's
+take-up of the release (lam / 2l = 1 / (1 + eps_rod)) with the exponents of l against eps0
+and against eps_rod.
 """
 
 from __future__ import annotations
