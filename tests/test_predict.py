@@ -63,8 +63,9 @@ def test_cli_json(tmp_path: Path) -> None:
 
 def test_the_atlas_at_the_nearest_rod_length_answers(tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    """A further atlas CSV in the data folder is read, a case inside it is answered from it
-    directly, and a scaled case from the atlas whose rod length is nearest its own."""
+    """Further atlas CSVs in the data folder (and its sub-folders) are read, a case inside one
+    is answered from it directly, and a scaled case from the atlas whose (L, eps0) is nearest
+    its own (in log L and log eps0)."""
     from undulate.design import predict
     from undulate.design.atlas import ATLAS_FILE
 
@@ -76,12 +77,25 @@ def test_the_atlas_at_the_nearest_rod_length_answers(tmp_path: Path,
     (data / "phase_diagram_L50.csv").write_text("# " + json.dumps(meta) + "\n" + rest)
     for src in (SINGLE_ROD_FILE, ATLAS_FILE):
         (data / src.name).write_text(src.read_text())
+    first, rest = SINGLE_ROD_FILE.read_text().split("\n", 1)
+    (data / "grid").mkdir()
+    (data / "grid" / "eps0-0.25.csv").write_text(
+        "# " + json.dumps(json.loads(first[2:]) | {"eps0": 0.25}) + "\n" + rest)
     monkeypatch.setattr(predict, "SINGLE_ROD_FILE", data / SINGLE_ROD_FILE.name)
     monkeypatch.setattr(predict, "ATLAS_FILE", data / ATLAS_FILE.name)
-    assert sorted(a.meta["L"] for a in predict._atlases()) == [50.0, 100.0, 100.0]
+    found = {name: (a.meta["L"], a.meta["eps0"]) for name, a in predict._atlases()}
+    assert found == {"single_rod": (100.0, 0.5), "phase_diagram": (100.0, 0.5),
+                     "phase_diagram_L50": (50.0, 0.5), "grid/eps0-0.25": (100.0, 0.25)}
+    def lone(eps0: float) -> object:
+        return case_from_dict({"rods": {"E_B": 1000.0, "h": 0.3}, "release": {"eps0": eps0}})
+
+    low = predict_case(lone(0.3))
+    assert low["atlas"] == "grid/eps0-0.25" and low["scaled"]["eps0"] == 0.25
+    assert predict_case(lone(0.45))["atlas"] == "single_rod"
 
     direct = predict_case(_case(N=5, h=0.3, s=10.0, L=50.0))
     assert direct["source"] == "simulation" and "scaled" not in direct
+    assert direct["atlas"] == "phase_diagram_L50"
     near = predict_case(_case(N=5, h=0.3, s=10.0, L=45.0))
     assert near["confidence"] in ("scaled", "near a transition")
     assert near["scaled"]["L"] == 50.0

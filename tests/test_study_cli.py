@@ -87,3 +87,29 @@ def test_batch_with_dask_is_refused_in_one_line(tmp_path: Path) -> None:
                               str(tmp_path / "s"), "--batch", "4", "--dask", "tcp://127.0.0.1:1"])
     assert res.exit_code == 2
     assert "batch: runs are batched in local workers only" in res.output
+
+
+def test_a_sweep_over_L_and_eps0_makes_one_atlas_per_combination(tmp_path: Path) -> None:
+    """`study atlas` on a sweep that also sweeps rods.L and release.eps0 writes one atlas per
+    (L, eps0) into the --out folder, each holding its own L and eps0; a file --out is refused
+    with one line."""
+    from undulate.design.atlas import load_atlas
+
+    sweep = tmp_path / "grid.toml"
+    sweep.write_text('name = "grid"\n[base.rods]\nN = 1\n[sweep]\n"rods.L" = [40.0, 60.0]\n'
+                     '"release.eps0" = [0.25, 0.5]\n"rods.h" = [0.2, 0.3, 0.5]\n')
+    out = tmp_path / "st"
+    res = runner.invoke(app, ["study", "run", str(sweep), "--out", str(out), "--workers", "1",
+                              "--no-artifacts"])
+    assert res.exit_code == 0, res.output
+    bad = runner.invoke(app, ["study", "atlas", str(out), "--out", str(tmp_path / "a.csv")])
+    assert bad.exit_code != 0 and "give a folder" in bad.output
+    assert "Traceback" not in bad.output
+    res = runner.invoke(app, ["study", "atlas", str(out), "--out", str(tmp_path / "atlases")])
+    assert res.exit_code == 0, res.output
+    files = sorted(p.name for p in (tmp_path / "atlases").glob("*.csv"))
+    assert files == ["L40_eps0-0.25.csv", "L40_eps0-0.5.csv", "L60_eps0-0.25.csv",
+                     "L60_eps0-0.5.csv"]
+    one = load_atlas(tmp_path / "atlases" / "L60_eps0-0.25.csv")
+    assert (one.meta["L"], one.meta["eps0"], one.meta["N"]) == (60.0, 0.25, 1)
+    assert sorted(one.points["h"]) == [0.2, 0.3, 0.5]

@@ -144,6 +144,21 @@ def test_page_end_to_end(server: str, tmp_path: Path) -> None:
         assert int(cells.nth(3).inner_text()) == int(pm["n"].item())
         fam = str(pm["family"].item())
         assert cells.nth(6).inner_text() == fam
+        # five lines of 50 mm, 4 mm apart: the panel switches to the diagram simulated at
+        # L = 50 mm, which holds them, and marks the design on it
+        _set(page, "N", 5)
+        _set(page, "s", 4)
+        _set(page, "L", 50)
+        page.click("#place")
+        page.wait_for_function("document.querySelector('#atlas').dataset.atlas == "
+                               "'five_rods_L50'")
+        page.wait_for_function("document.querySelectorAll('#atlas circle').length == 1")
+        assert "L = 50 mm" in page.locator("#atlas-where").inner_text()
+        _set(page, "N", 3)
+        _set(page, "s", 10)
+        _set(page, "L", 40)
+        page.click("#place")
+        page.wait_for_function("document.querySelectorAll('#prediction tbody tr').length == 3")
         # a bad thickness: one clear line naming the field, no prediction
         _set(page, "h", -1)
         page.wait_for_function("document.querySelector('#error').textContent.startsWith('h:')")

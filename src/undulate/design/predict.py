@@ -13,6 +13,7 @@ outcomes seen around the design are listed); outside, eq. (1) and the phase map 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,25 +22,78 @@ from ..model.families import decide_family
 from .atlas import ATLAS_FILE, Atlas, Location, locate, shipped_atlas
 from .scaling import equivalent, load_scaling
 
-__all__ = ["SINGLE_ROD_FILE", "predict_case", "scaled_location"]
+__all__ = ["SINGLE_ROD_FILE", "Placement", "atlas_distance", "atlas_named", "place",
+           "predict_case", "scaled_location"]
 
 #: the single-rod atlas shipped in the package (from the single-rod-h study)
 SINGLE_ROD_FILE = Path(__file__).with_name("data") / "single_rod.csv"
 SOURCES = ("auto", "simulation", "theory")
 
 
-def _atlases() -> list[Atlas]:
-    """The shipped atlases: the single-rod sweep, the five-rod diagram, then any further
-    atlas CSV in the package's data folder (e.g. a diagram at another rod length)."""
+def _atlases() -> list[tuple[str, Atlas]]:
+    """The shipped atlases with their names (the file's path in the data folder, without
+    ``.csv``): the single-rod sweep, the five-rod diagram, then every further atlas CSV in
+    the data folder and its sub-folders (the diagram at another rod length, single rods over
+    L and eps0)."""
+    data = SINGLE_ROD_FILE.parent
+    more = sorted(p for p in data.rglob("*.csv") if p not in (SINGLE_ROD_FILE, ATLAS_FILE))
     out = []
-    more = sorted(p for p in SINGLE_ROD_FILE.parent.glob("*.csv")
-                  if p not in (SINGLE_ROD_FILE, ATLAS_FILE))
     for path in (SINGLE_ROD_FILE, ATLAS_FILE, *more):
         try:
-            out.append(shipped_atlas(path))
+            out.append((path.relative_to(data).with_suffix("").as_posix(), shipped_atlas(path)))
         except (OSError, ValueError):
             continue
     return out
+
+
+def atlas_named(name: str) -> Atlas:
+    """A shipped atlas by its name (as in :class:`Placement`); KeyError lists the names."""
+    found = dict(_atlases())
+    if name not in found:
+        raise KeyError(f"atlas: no shipped atlas {name!r} (there are: {', '.join(found)})")
+    return found[name]
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A design placed on one shipped atlas: where it sits (``loc``), the atlas's ``name``,
+    and, when it was carried there by the scaling, ``scaled`` (h', s', the length factor, p,
+    the atlas's L and eps0)."""
+
+    name: str
+    atlas: Atlas
+    loc: Location
+    scaled: dict[str, Any] | None = None
+
+
+def atlas_distance(L: float, eps0: float, meta: dict[str, Any]) -> float:
+    """How far the scaling carries a case at (L, eps0) to an atlas simulated at its L and
+    eps0: the distance in (log L, log eps0)."""
+    return math.hypot(math.log(L / float(meta["L"])), math.log(eps0 / float(meta["eps0"])))
+
+
+def place(*, h: float, s: float, N: int, L: float, eps0: float,
+          **moduli: float) -> tuple[Placement | None, Placement | None]:
+    """A design on the shipped atlases of its kind (one rod or several): (the best direct
+    placement: inside an atlas if one holds it, else the nearest point of the first;
+    the design carried by the scaling onto the atlas simulated nearest its (L, eps0), or
+    None). ``moduli``: E_B, E, t, b, which must be an atlas's."""
+    best: Placement | None = None
+    scaled: list[tuple[float, Placement]] = []
+    for name, atlas in _atlases():
+        single = atlas.meta.get("N") == 1
+        if single != (N == 1):
+            continue
+        s_at = float(atlas.points["s"].iloc[0]) if single else s
+        loc = locate(atlas, h=h, s=s_at, N=N, L=L, eps0=eps0, **moduli)
+        if best is None or (loc.inside and not best.loc.inside):
+            best = Placement(name, atlas, loc)
+        carried = None if loc.inside else scaled_location(atlas, h, s_at, L, eps0, single,
+                                                           N=N, **moduli)
+        if carried is not None:
+            scaled.append((atlas_distance(L, eps0, atlas.meta),
+                           Placement(name, atlas, *carried)))
+    return best, (min(scaled, key=lambda c: c[0])[1] if scaled else None)
 
 
 def _theory(case: Any) -> dict[str, Any]:
@@ -91,15 +145,18 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
         warnings.append("a pattern of lines: the simulated data cover parallel straight rods "
                         "only; theory for the case's [rods] values")
         source = "theory"
-    best, scaled = _from_atlases(case) if source != "theory" else (None, None)
-    if best is not None and (best.inside or source == "simulation"):
-        if not best.inside:
-            warnings.append(f"outside the simulated data ({best.reason}): the nearest point")
+    mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
+    best, scaled = (place(h=r.h, s=r.s, N=r.N, L=r.L, eps0=case.release.eps0, **mat)
+                    if source != "theory" else (None, None))
+    if best is not None and (best.loc.inside or source == "simulation"):
+        if not best.loc.inside:
+            warnings.append(f"outside the simulated data ({best.loc.reason}): the nearest "
+                            "point")
         return _simulated(best, warnings, n_rods)
     if scaled is not None:
-        return _scaled_answer(*scaled, case, warnings, n_rods)
+        return _scaled_answer(scaled, case, warnings, n_rods)
     if best is not None and source == "auto":
-        warnings.append(f"outside the simulated data ({best.reason}): eq. (1) and the "
+        warnings.append(f"outside the simulated data ({best.loc.reason}): eq. (1) and the "
                         "phase map of the analytical model, which do not know the end "
                         "effects of a finite rod or the families")
     th = _theory(case)
@@ -107,31 +164,6 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
     return {"source": "theory", "family": th["family"], "confidence": "theory",
             "summary": f"theory: {th['family']} n = {th['n']}", "alternatives": [],
             "warnings": warnings, "rods": [{"index": k, **rod} for k in range(n_rods)]}
-
-
-def _from_atlases(case: Any) -> tuple[Location | None, tuple | None]:
-    """The best direct location on the atlases of the case's kind (one rod or several), and,
-    when it is outside, the case carried onto an atlas by the scaling: (location, the
-    equivalent h and s, the length factor, eps0 of the atlas), or None. Of several atlases
-    that can take the scaled case, the one simulated at the rod length nearest the case's
-    (ratio) answers: the scaling carries it the shortest way."""
-    r, eps0 = case.rods, case.release.eps0
-    mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
-    best: Location | None = None
-    scaled: list[tuple[float, tuple]] = []
-    for atlas in _atlases():
-        single = atlas.meta.get("N") == 1
-        if single != (r.N == 1):
-            continue
-        s = float(atlas.points["s"].iloc[0]) if single else r.s
-        loc = locate(atlas, h=r.h, s=s, N=r.N, L=r.L, eps0=eps0, **mat)
-        if best is None or (loc.inside and not best.inside):
-            best = loc
-        carried = None if loc.inside else scaled_location(atlas, r.h, s, r.L, eps0, single,
-                                                           N=r.N, **mat)
-        if carried is not None:
-            scaled.append((abs(math.log(r.L / float(atlas.meta["L"]))), carried))
-    return best, (min(scaled, key=lambda c: c[0])[1] if scaled else None)
 
 
 def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
@@ -156,25 +188,29 @@ def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, sin
                  "L": float(m["L"]), "eps0": float(m["eps0"])}
 
 
-def _simulated(loc: Location, warnings: list[str], n_rods: int) -> dict[str, Any]:
+def _simulated(pl: Placement, warnings: list[str], n_rods: int) -> dict[str, Any]:
+    loc = pl.loc
     rod = {"n": loc.n, "l": loc.l, "lam": loc.lam, "a": loc.a}
-    return {"source": "simulation", "family": loc.family, "confidence": loc.confidence,
+    return {"source": "simulation", "atlas": pl.name, "family": loc.family,
+            "confidence": loc.confidence,
             "summary": loc.summary(), "alternatives": [
                 {"family": f, "n": n} for f, n in loc.alternatives],
             "warnings": warnings, "rods": [{"index": k, **rod} for k in range(n_rods)]}
 
 
-def _scaled_answer(loc: Location, sc: dict[str, Any], case: Any, warnings: list[str],
+def _scaled_answer(pl: Placement, case: Any, warnings: list[str],
                    n_rods: int) -> dict[str, Any]:
     """A located point's answer carried back to the case: lengths by the length factor, lam
     also by the chord's shortening, the family of one arch decided on the carried shape."""
+    loc, sc = pl.loc, pl.scaled
+    assert sc is not None
     k, eps0 = sc["length_factor"], case.release.eps0
     lam = loc.lam * k * (1.0 + sc["eps0"]) / (1.0 + eps0)
     rod = {"n": loc.n, "l": loc.l * k, "lam": lam, "a": loc.a * k}
     family = decide_family(1, lam=lam, a=rod["a"]) if loc.n == 1 else loc.family
     where = f"h' = {sc['h']:.3g} mm" + (f", s' = {sc['s']:.3g} mm" if sc["s"] is not None
                                          else "")
-    out = _simulated(loc, warnings, n_rods)
+    out = _simulated(pl, warnings, n_rods)
     out.update(family=family, rods=[{"index": j, **rod} for j in range(n_rods)],
                confidence="scaled" if loc.confidence == "simulated" else loc.confidence,
                summary=f"scaled from the simulated L = {sc['L']:g} mm, eps0 = "

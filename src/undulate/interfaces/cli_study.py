@@ -406,52 +406,71 @@ def report_cmd(directory: Annotated[Path, typer.Argument(help="study directory")
     _out.print(str(write_report(directory)), highlight=False, soft_wrap=True)
 
 
-#: what a SWEEP.toml study may sweep to make an atlas (one row per h, s)
+#: what a SWEEP.toml study may sweep to make an atlas (one row per h, s) ...
 _ATLAS_SWEEP = frozenset({"rods.h", "rods.s", "imperfection.seed"})
+#: ... and what it may sweep besides to make one atlas per combination of their values
+_ATLAS_GROUPS = {"rods.L": "L", "release.eps0": "eps0"}
 
 
 @study_app.command("atlas")
 def atlas_cmd(
     directory: Annotated[Path, typer.Argument(
         help="a study directory (parallel-phase-diagram, single-rod-h, or a sweep over "
-             "rods.h and rods.s only), or its table.csv")],
-    out: Annotated[Path, typer.Option("--out", help="atlas CSV to write")],
+             "rods.h and rods.s, and maybe rods.L and release.eps0), or its table.csv")],
+    out: Annotated[Path, typer.Option(
+        "--out", help="atlas CSV to write; a folder when the study sweeps rods.L or "
+                      "release.eps0 (one CSV per combination, named L<L>_eps0-<eps0>.csv)")],
 ) -> None:
     """A study's results as an atlas for designs (one row per (h, s): family, n, l, lam, a).
 
-    The package ships two (undulate.design.atlas, undulate predict): remake them with
+    The package ships several (undulate.design.atlas, undulate predict): remake them with
     undulate study atlas DIR --out src/undulate/design/data/phase_diagram.csv (the diagram)
     and undulate study atlas docs/studies/single-rod-h/table.csv --out
     src/undulate/design/data/single_rod.csv. A SWEEP.toml study that sweeps rods.h and
-    rods.s (and the seed) only, e.g. the diagram at another rod length, makes one too;
-    predict reads every atlas CSV in that data folder.
+    rods.s (and the seed) only, e.g. the diagram at another rod length, makes one too; one
+    that also sweeps rods.L or release.eps0 makes one atlas per (L, eps0) in the folder
+    --out. predict reads every atlas CSV in that data folder and its sub-folders.
     """
     import pandas as pd
 
     from undulate.design.atlas import build_atlas, write_atlas
     from undulate.study.storage import collect, read_study
 
+    swept: set[str] = set()
     if directory.is_file() and directory.suffix == ".csv":
         table, setup = pd.read_csv(directory), None
     elif (directory / "runs").is_dir():
         meta = read_study(directory) or {}
         swept = set((meta.get("definition") or {}).get("sweep") or {})
-        atlas_sweep = meta.get("kind") == "sweep" and swept and swept <= _ATLAS_SWEEP
+        allowed = _ATLAS_SWEEP | set(_ATLAS_GROUPS)
+        atlas_sweep = meta.get("kind") == "sweep" and swept and swept <= allowed
         if meta.get("name") not in ("parallel-phase-diagram", "single-rod-h") and not atlas_sweep:
             _fail(f"{directory}: an atlas is made from a parallel-phase-diagram or "
-                  f"single-rod-h study, or a sweep over {', '.join(sorted(_ATLAS_SWEEP))} "
+                  f"single-rod-h study, or a sweep over {', '.join(sorted(allowed))} "
                   f"only (this one is {meta.get('name')!r}"
                   + (f", sweeping {', '.join(sorted(swept))})" if swept else ")"))
         table, setup = collect(directory), meta.get("definition", {}).get("setup")
     else:
         _fail(f"{directory}: not a study directory (no runs/) nor a table .csv")
-    try:
-        atlas = build_atlas(table, setup=setup)
-    except (ValueError, KeyError) as err:
-        _fail(f"{directory}: {err}")
-    path = write_atlas(atlas, out)
-    _out.print(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs",
-               highlight=False, soft_wrap=True)
+    keys = [col for path, col in _ATLAS_GROUPS.items() if path in swept and col in table]
+    if not keys:
+        groups = [("", table)]
+    elif out.suffix == ".csv":
+        _fail(f"--out: {out} is a file, but the study sweeps {', '.join(keys)}: give a "
+              "folder (one atlas per combination)")
+    else:
+        groups = [("_".join(f"{k}{'-' if k == 'eps0' else ''}{v:g}" for k, v in
+                            zip(keys, vals if isinstance(vals, tuple) else (vals,),
+                                strict=True)), g)
+                  for vals, g in table.groupby(keys if len(keys) > 1 else keys[0])]
+    for label, part in groups:
+        try:
+            atlas = build_atlas(part, setup=setup)
+        except (ValueError, KeyError) as err:
+            _fail(f"{directory}: {err}")
+        path = write_atlas(atlas, out / f"{label}.csv" if label else out)
+        _out.print(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs",
+                   highlight=False, soft_wrap=True)
 
 
 def _exit_now(code: int) -> None:

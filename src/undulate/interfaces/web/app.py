@@ -249,37 +249,34 @@ def _validation_line(err: RequestValidationError) -> str:
 
 
 def _locate_groups(out: dict[str, Any], p: Params) -> None:
-    """Each group of parallel lines placed on the simulated phase diagram (``atlas``)."""
-    from ...design.atlas import locate, shipped_atlas
-    from ...design.predict import scaled_location
+    """Each group of parallel lines placed on the shipped phase diagrams (``atlas``: where it
+    sits, and the name of the diagram that answers, as ``undulate predict`` chooses it)."""
+    from ...design.predict import place
 
-    atlas = shipped_atlas()
     by_id = {r["id"]: r for r in out["lines"]}
     for g in out["groups"]:
         members = [by_id[i] for i in g["lines"]]
         live = [r for r in members if r.get("n")]
         if not live:
             continue
-        if g.get("s") is None:  # one line alone: the diagram is of five rods
+        if g.get("s") is None:  # one line alone: the diagrams are of several lines
             g["atlas"] = {"inside": False, "confidence": "outside", "summary": (
-                f"one line alone: the simulated diagram is of {atlas.meta.get('N', 5)} "
-                "parallel lines")}
+                "one line alone: the simulated diagrams are of parallel lines")}
             continue
         r0 = live[0]
         L = sum(r["L"] for r in live) / len(live)
         mat = {"E_B": p.E_B, "E": p.E, "t": p.t, "b": r0["b"]}
-        # (N first: the reasons of an outside design name it first)
-        loc = locate(atlas, h=r0["h"], s=g["s"], N=g["N"], L=L, eps0=r0["eps_line"], **mat)
-        scaled = None if loc.inside else scaled_location(atlas, r0["h"], g["s"], L,
-                                                          r0["eps_line"], False, N=g["N"],
-                                                          **mat)
-        if scaled is None:
-            g["atlas"] = loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"]}
+        best, scaled = place(h=r0["h"], s=g["s"], N=g["N"], L=L, eps0=r0["eps_line"], **mat)
+        if best is None:
             continue
-        # another L or eps0: the design drawn where it sits on the diagram once scaled
-        sloc, sc = scaled
+        if best.loc.inside or scaled is None:
+            g["atlas"] = best.loc.to_dict() | {"design_h": r0["h"], "design_s": g["s"],
+                                               "atlas": best.name}
+            continue
+        # another L or eps0: the design drawn where it sits on that diagram once scaled
+        sloc, sc = scaled.loc, scaled.scaled or {}
         g["atlas"] = sloc.to_dict() | {
-            "design_h": sc["h"], "design_s": sc["s"], "scaled": sc,
+            "design_h": sc["h"], "design_s": sc["s"], "scaled": sc, "atlas": scaled.name,
             "confidence": "scaled" if sloc.confidence == "simulated" else sloc.confidence,
             "summary": f"scaled from the simulated L = {sc['L']:g} mm, eps0 = {sc['eps0']:g} "
                        f"(h' = {sc['h']:.3g} mm, s' = {sc['s']:.3g} mm): {sloc.summary()}"}
@@ -347,11 +344,16 @@ def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
         return out
 
     @app.get("/api/atlas")
-    def atlas() -> dict[str, Any]:
-        """The simulated phase diagram shipped with undulate (undulate.design.atlas)."""
-        from ...design.atlas import shipped_atlas
+    def atlas(name: str = "phase_diagram") -> dict[str, Any]:
+        """A simulated phase diagram shipped with undulate (undulate.design.atlas), by the
+        name a placed group gives (default: the five-rod diagram at L = 100 mm)."""
+        from ...design.predict import atlas_named
 
-        return shipped_atlas().to_dict()
+        try:
+            found = atlas_named(name)
+        except KeyError as err:
+            raise HTTPException(404, str(err.args[0])) from None
+        return found.to_dict() | {"name": name}
 
     @app.post("/api/pattern/svg")
     def pattern_svg(body: SvgIn) -> dict[str, Any]:

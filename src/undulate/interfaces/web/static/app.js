@@ -209,15 +209,30 @@ const FAMILY_COLOURS = { coherent: "#1f77b4", independent: "#2ca02c", rolls: "#d
   bends: "#ff7f0e", waves: "#7f7f7f", flat: "#cccccc" };
 const COLOUR_NAMES = { coherent: "blue", independent: "green", rolls: "red", bends: "orange",
   waves: "grey", flat: "light grey" };
+// the diagrams by name (GET /api/atlas?name=...): the panel shows the one that answers the
+// first placed group (undulate ships several: five rods at L = 100 mm and at L = 50 mm)
+const atlases = {};
 let atlas = null;
-fetch("/api/atlas").then((r) => r.json()).then((a) => { atlas = a; drawAtlas(lastGroups); })
-  .catch(() => {});
 let lastGroups = [];
+
+function loadAtlas(name) {
+  if (atlases[name]) return;
+  atlases[name] = "loading";
+  fetch(`/api/atlas?name=${encodeURIComponent(name)}`).then((r) => r.json())
+    .then((a) => { atlases[name] = a; drawAtlas(lastGroups); })
+    .catch(() => { delete atlases[name]; });
+}
+loadAtlas("phase_diagram");
 
 function drawAtlas(groups) {
   lastGroups = groups || [];
+  const placed = lastGroups.find((g) => g.atlas && g.atlas.atlas);
+  const want = placed ? placed.atlas.atlas : (atlas ? atlas.name : "phase_diagram");
+  if (typeof atlases[want] === "object") atlas = atlases[want];
+  else loadAtlas(want);
   const svg = $("atlas");
   if (!atlas || !svg) return;
+  svg.dataset.atlas = atlas.name;
   svg.innerHTML = "";
   const m = atlas.meta;
   const [h0, h1] = [0, Math.max(m.h_range[1] + m.h_step, 0.5)];
@@ -255,7 +270,7 @@ function drawAtlas(groups) {
   for (const g of lastGroups) {
     if (!g.atlas) continue;
     lines.push(`group ${g.index}: ${g.atlas.summary}`);
-    if (g.atlas.design_h === undefined) continue;
+    if (g.atlas.design_h === undefined || g.atlas.atlas !== atlas.name) continue;
     el("circle", { cx: X(g.atlas.design_h), cy: Y(g.atlas.design_s), r: 5,
       class: g.atlas.inside ? "atlas-design" : "atlas-design outside" });
   }
