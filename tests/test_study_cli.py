@@ -113,3 +113,31 @@ def test_a_sweep_over_L_and_eps0_makes_one_atlas_per_combination(tmp_path: Path)
     one = load_atlas(tmp_path / "atlases" / "L60_eps0-0.25.csv")
     assert (one.meta["L"], one.meta["eps0"], one.meta["N"]) == (60.0, 0.25, 1)
     assert sorted(one.points["h"]) == [0.2, 0.3, 0.5]
+
+
+def test_studies_are_pooled_into_one_atlas_of_one_set_up(tmp_path: Path) -> None:
+    """`study atlas A B` pools a diagram and its refinement (their points together); studies
+    run on different set-ups are refused with one line."""
+    from undulate.design.atlas import load_atlas
+
+    def sweep(name: str, hs: str, *setup: str) -> Path:
+        toml = tmp_path / f"{name}.toml"
+        toml.write_text(f'name = "{name}"\n[base.rods]\nN = 5\n[sweep]\n"rods.h" = [{hs}]\n'
+                        '"rods.s" = [5.0, 10.0]\n')
+        out = tmp_path / name
+        res = runner.invoke(app, ["study", "run", str(toml), "--out", str(out), "--workers",
+                                  "1", "--no-artifacts", *setup])
+        assert res.exit_code == 0, res.output
+        return out
+
+    coarse, fine = sweep("coarse", "0.2, 0.4"), sweep("fine", "0.3")
+    res = runner.invoke(app, ["study", "atlas", str(coarse), str(fine), "--out",
+                              str(tmp_path / "a.csv")])
+    assert res.exit_code == 0, res.output
+    atlas = load_atlas(tmp_path / "a.csv")
+    assert sorted(set(atlas.points["h"])) == [0.2, 0.3, 0.4] and atlas.meta["points"] == 6
+    other = sweep("other", "0.5", "--setup", "study-2022")
+    bad = runner.invoke(app, ["study", "atlas", str(coarse), str(other), "--out",
+                              str(tmp_path / "b.csv")])
+    assert bad.exit_code != 0 and "different set-ups" in bad.output
+    assert "Traceback" not in bad.output and not (tmp_path / "b.csv").exists()

@@ -73,14 +73,16 @@ def atlas_distance(L: float, eps0: float, meta: dict[str, Any]) -> float:
 
 
 def place(*, h: float, s: float, N: int, L: float, eps0: float,
+          atlases: list[tuple[str, Atlas]] | None = None,
           **moduli: float) -> tuple[Placement | None, Placement | None]:
-    """A design on the shipped atlases of its kind (one rod or several): (the best direct
+    """A design on the atlases of its kind (one rod or several): (the best direct
     placement: inside an atlas if one holds it, else the nearest point of the first;
     the design carried by the scaling onto the atlas simulated nearest its (L, eps0), or
-    None). ``moduli``: E_B, E, t, b, which must be an atlas's."""
+    None). ``atlases``: (name, atlas) pairs, default the shipped ones; ``moduli``: E_B, E,
+    t, b, which must be an atlas's."""
     best: Placement | None = None
     scaled: list[tuple[float, Placement]] = []
-    for name, atlas in _atlases():
+    for name, atlas in _atlases() if atlases is None else atlases:
         single = atlas.meta.get("N") == 1
         if single != (N == 1):
             continue
@@ -124,7 +126,8 @@ def arch_rise(length: float, eps0: float) -> float:
     return length / (2.0 * x) * (1.0 - math.cos(x))
 
 
-def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
+def predict_case(case: Any, source: str = "auto",
+                 atlases: list[tuple[str, Atlas]] | None = None) -> dict[str, Any]:
     """Family and per-rod n, l, lam, a of a case (a :class:`undulate.model.Case`).
 
     ``source``: "auto" (simulated data where the case is inside an atlas, or carried there
@@ -134,7 +137,8 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
     ``source``, ``family``, ``confidence`` ("simulated", "scaled", "near a transition",
     "outside" or "theory"), ``summary``, ``warnings`` and ``rods`` (one entry per rod, in
     the order of a run's metrics.json: by y); a scaled answer also has ``scaled`` (the
-    equivalent h and s on the atlas, the length factor and the exponent).
+    equivalent h and s on the atlas, the length factor and the exponent). ``atlases``:
+    (name, atlas) pairs to answer from instead of the shipped ones (a cross-check).
     """
     if source not in SOURCES:
         raise ValueError(f"source: must be one of {', '.join(SOURCES)} (got {source!r})")
@@ -146,7 +150,8 @@ def predict_case(case: Any, source: str = "auto") -> dict[str, Any]:
                         "only; theory for the case's [rods] values")
         source = "theory"
     mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
-    best, scaled = (place(h=r.h, s=r.s, N=r.N, L=r.L, eps0=case.release.eps0, **mat)
+    best, scaled = (place(h=r.h, s=r.s, N=r.N, L=r.L, eps0=case.release.eps0,
+                          atlases=atlases, **mat)
                     if source != "theory" else (None, None))
     if best is not None and (best.loc.inside or source == "simulation"):
         if not best.loc.inside:

@@ -257,9 +257,22 @@ function drawAtlas(groups) {
   el("text", { x: 163, y: 208, class: "atlas-tick", "text-anchor": "middle" }, "h [mm]");
   el("text", { x: 8, y: 100, class: "atlas-tick", transform: "rotate(-90 8 100)",
     "text-anchor": "middle" }, "s [mm]");
-  const w = Math.max(3, (X(m.h_step) - X(0)) * 0.8);
-  const hgt = Math.max(3, (Y(0) - Y(m.s_step)) * 0.8);
+  // each point's cell as wide as the gap to its nearest simulated neighbour (a refined
+  // diagram has finer rows at the thin end)
+  const gaps = (vals) => {
+    const u = [...new Set(vals)].sort((a, b) => a - b);
+    const g = {};
+    u.forEach((v, i) => {
+      const d = [i > 0 ? v - u[i - 1] : Infinity, i < u.length - 1 ? u[i + 1] - v : Infinity];
+      g[v] = Math.min(...d) === Infinity ? 1 : Math.min(...d);
+    });
+    return g;
+  };
+  const hGap = gaps(atlas.points.map((p) => p.h));
+  const sGap = gaps(atlas.points.map((p) => p.s));
   for (const p of atlas.points) {
+    const w = Math.max(2, (X(hGap[p.h]) - X(0)) * 0.8);
+    const hgt = Math.max(2, (Y(0) - Y(sGap[p.s])) * 0.8);
     const r = el("rect", { x: X(p.h) - w / 2, y: Y(p.s) - hgt / 2, width: w, height: hgt,
       fill: FAMILY_COLOURS[p.family] || "#999", class: "atlas-point" });
     const t = document.createElementNS(SVGNS, "title");
