@@ -78,8 +78,8 @@ def main() -> int:
     wall = time.perf_counter() - t0
     ys1 = yardstick()
     table = collect(args.out).set_index("run_id")
-    lines = ["| case | h | L | eps0 | N | s | simulated | predict | confidence | theory |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| case | h | L | eps0 | N | s | simulated | predict | confidence | atlas | theory |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     hits = {"predict_n": 0, "predict_family": 0, "theory_n": 0, "theory_family": 0,
             "predict_n_or_alternative": 0}
     by_confidence: dict[str, list[int]] = {}  # confidence -> [cases, n right, family right]
@@ -104,7 +104,8 @@ def main() -> int:
         lines.append(f"| {r.params['case']} | {rods['h']:g} | {rods['L']:g} | "
                      f"{c['release']['eps0']:g} | {rods['N']} | "
                      f"{rods['s']:g} | {sim_f} n = {sim_n} | {p['family']} n = "
-                     f"{p['rods'][0]['n']} | {p['confidence']} | {t['family']} n = "
+                     f"{p['rods'][0]['n']} | {p['confidence']} | {p.get('atlas', '-')} | "
+                     f"{t['family']} n = "
                      f"{t['rods'][0]['n']} |")
     rate = {k: (v / done if done else float("nan")) for k, v in hits.items()}
     ys = 0.5 * (ys0 + ys1)

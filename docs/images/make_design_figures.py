@@ -7,7 +7,9 @@
   n, and four designs placed on it with what ``undulate predict`` says of them (family, n,
   confidence);
 * ``predict-single.png``: a lone rod's n against h, simulated (the shipped single-rod atlas)
-  and from eq. (1) alone, where the two part.
+  and from eq. (1) alone, where the two part;
+* ``predict-grid.png``: a lone rod's simulated n against h at every rod length and
+  pre-stretch of the shipped single-rod grid (the atlases a case is scaled from).
 
 No simulation is run: the figures read the package's atlases (``undulate study atlas`` makes
 them from the study tables) and call the predictor as the command line does. Seconds.
@@ -94,12 +96,45 @@ def single_figure(out: Path) -> Path:
     return out
 
 
+def grid_figure(out: Path) -> Path:
+    """n against h per (L, eps0) of the shipped single-rod grid, one panel per L."""
+    from undulate.design.predict import _atlases
+
+    grid = [a for name, a in _atlases() if name.startswith("single_rod_grid/")]
+    lengths = sorted({float(a.meta["L"]) for a in grid})
+    if not lengths:
+        raise SystemExit("no single-rod grid shipped (src/undulate/design/data/single_rod_grid)")
+    fig, axes = plt.subplots(1, len(lengths), figsize=(2.6 * len(lengths), 3.4), sharey=True)
+    axes = np.atleast_1d(axes)
+    eps = sorted({float(a.meta["eps0"]) for a in grid})
+    shades = dict(zip(eps, plt.cm.viridis(np.linspace(0.0, 0.85, len(eps))), strict=True))
+    for ax, L in zip(axes, lengths, strict=True):
+        for a in sorted((a for a in grid if float(a.meta["L"]) == L),
+                        key=lambda a: a.meta["eps0"]):
+            pts = a.points.sort_values("h")
+            e = float(a.meta["eps0"])
+            ax.plot(pts["h"], pts["n"], "-", color=shades[e], lw=1.0, label=f"eps0 = {e:g}")
+            for fam, d in pts.groupby("family"):
+                ax.plot(d["h"], d["n"], "o", ms=3.2, color=COLOURS.get(fam, "k"), mec="none")
+        ax.set_xscale("log")
+        ax.set_title(f"L = {L:g} mm", fontsize=9)
+        ax.set_xlabel("h [mm]")
+    axes[0].set_ylabel("half-waves n (simulated)")
+    axes[0].legend(fontsize=7)
+    fig.suptitle("A lone rod over length and pre-stretch (reference set-up; dots coloured by "
+                 "family: grey-violet waves, orange bends, red rolls)", fontsize=9)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path(__file__).parent)
     a = ap.parse_args()
     for p in (atlas_figure(a.out / "predict-atlas.png"),
-              single_figure(a.out / "predict-single.png")):
+              single_figure(a.out / "predict-single.png"),
+              grid_figure(a.out / "predict-grid.png")):
         print(f"wrote {p}")
 
 

@@ -68,8 +68,11 @@ class Placement:
 
 def atlas_distance(L: float, eps0: float, meta: dict[str, Any]) -> float:
     """How far the scaling carries a case at (L, eps0) to an atlas simulated at its L and
-    eps0: the distance in (log L, log eps0)."""
-    return math.hypot(math.log(L / float(meta["L"])), math.log(eps0 / float(meta["eps0"])))
+    eps0: the distance in (log L, p log eps0), p the scaling's exponent of eps0 (the number
+    of half-waves on a rod goes as L eps0^p, so a factor 2 in eps0 moves it as a factor
+    2^p in L does)."""
+    p = load_scaling().p
+    return math.hypot(math.log(L / float(meta["L"])), p * math.log(eps0 / float(meta["eps0"])))
 
 
 def place(*, h: float, s: float, N: int, L: float, eps0: float,
@@ -77,8 +80,8 @@ def place(*, h: float, s: float, N: int, L: float, eps0: float,
           **moduli: float) -> tuple[Placement | None, Placement | None]:
     """A design on the atlases of its kind (one rod or several): (the best direct
     placement: inside an atlas if one holds it, else the nearest point of the first;
-    the design carried by the scaling onto the atlas simulated nearest its (L, eps0), or
-    None). ``atlases``: (name, atlas) pairs, default the shipped ones; ``moduli``: E_B, E,
+    the design carried by the scaling onto the atlas simulated nearest its (L, eps0) in
+    the sense of :func:`atlas_distance`, or None). ``atlases``: (name, atlas) pairs, default the shipped ones; ``moduli``: E_B, E,
     t, b, which must be an atlas's."""
     best: Placement | None = None
     scaled: list[tuple[float, Placement]] = []
