@@ -447,17 +447,14 @@ def atlas_cmd(
         _fail(f"{' '.join(map(str, directories))}: the studies were run on different "
               f"set-ups ({'; '.join(map(str, setups))}): pool only studies of one set-up")
     table = pd.concat(tables, ignore_index=True)
-    keys = [col for path, col in _ATLAS_GROUPS.items() if path in swept and col in table]
-    if not keys:
+    if not swept & set(_ATLAS_GROUPS):
         groups = [("", table)]
     elif out.suffix == ".csv":
-        _fail(f"--out: {out} is a file, but the study sweeps {', '.join(keys)}: give a "
-              "folder (one atlas per combination)")
+        _fail(f"--out: {out} is a file, but the study sweeps "
+              f"{', '.join(sorted(swept & set(_ATLAS_GROUPS)))}: give a folder (one atlas "
+              "per combination)")
     else:
-        groups = [("_".join(f"{k}{'-' if k == 'eps0' else ''}{v:g}" for k, v in
-                            zip(keys, vals if isinstance(vals, tuple) else (vals,),
-                                strict=True)), g)
-                  for vals, g in table.groupby(keys if len(keys) > 1 else keys[0])]
+        groups = [(f"L{L:g}_eps0-{e:g}", g) for (L, e), g in table.groupby(["L", "eps0"])]
     for label, part in groups:
         try:
             atlas = build_atlas(part, setup=(known[0] or None) if known else None)
