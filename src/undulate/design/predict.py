@@ -81,8 +81,8 @@ def place(*, h: float, s: float, N: int, L: float, eps0: float,
     """A design on the atlases of its kind (one rod or several): (the best direct
     placement: inside an atlas if one holds it, else the nearest point of the first;
     the design carried by the scaling onto the atlas simulated nearest its (L, eps0) in
-    the sense of :func:`atlas_distance`, or None). ``atlases``: (name, atlas) pairs, default the shipped ones; ``moduli``: E_B, E,
-    t, b, which must be an atlas's."""
+    the sense of :func:`atlas_distance`, or None). ``atlases``: (name, atlas) pairs,
+    default the shipped ones; ``moduli``: E_B, E, t, b, which must be an atlas's."""
     best: Placement | None = None
     scaled: list[tuple[float, Placement]] = []
     for name, atlas in _atlases() if atlases is None else atlases:
