@@ -10,7 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from undulate.design.predict import predict_case
+from undulate.design.atlas import load_atlas
+from undulate.design.predict import SINGLE_ROD_FILE, predict_case
 from undulate.design.scaling import equivalent, fit_exponent, fit_wavelength, load_scaling
 from undulate.model import case_from_dict
 
@@ -67,10 +68,12 @@ def test_equivalent_is_the_identity_at_the_reference() -> None:
 
 
 def test_another_eps0_is_answered_from_the_atlas_scaled() -> None:
+    """The scaling itself, from the single-rod sweep alone (L = 100 mm, eps0 = 0.5)."""
+    alone = [("single_rod", load_atlas(SINGLE_ROD_FILE))]
     sweep = pd.read_csv(STUDIES / "single-rod-eps0" / "table.csv")
     row = sweep[(sweep["h"] == 0.3) & (sweep["eps0"] == 0.8)].iloc[0]
     res = predict_case(case_from_dict({"rods": {"h": 0.3, "E_B": 1000.0},
-                                       "release": {"eps0": 0.8}}))
+                                       "release": {"eps0": 0.8}}), atlases=alone)
     assert res["source"] == "simulation" and res["confidence"] == "scaled"
     sc = load_scaling()
     l_eq = (sc.c0 + sc.c1 * 0.3) * 1.6 ** (-sc.p)
@@ -78,9 +81,23 @@ def test_another_eps0_is_answered_from_the_atlas_scaled() -> None:
     assert res["rods"][0]["n"] == row["n"]
     assert "scaled from the simulated L = 100 mm" in res["summary"]
     # a shorter rod: read off at the thickness of the same x, lengths scaled by L / 100
-    short = predict_case(case_from_dict({"rods": {"h": 0.15, "L": 50.0, "E_B": 1000.0}}))
+    short = predict_case(case_from_dict({"rods": {"h": 0.15, "L": 50.0, "E_B": 1000.0}}),
+                         atlases=alone)
     h_eq = short["scaled"]["h"]
     assert h_eq == pytest.approx((2 * (sc.c0 + sc.c1 * 0.15) - sc.c0) / sc.c1)
     same = predict_case(case_from_dict({"rods": {"h": round(h_eq, 2), "E_B": 1000.0}}))
     assert short["rods"][0]["n"] == same["rods"][0]["n"]
     assert short["rods"][0]["l"] == pytest.approx(0.5 * same["rods"][0]["l"], rel=0.05)
+
+
+def test_the_shipped_grid_answers_from_the_nearest_length_and_pre_stretch() -> None:
+    """With the lone-rod grid shipped, eps0 = 0.8 is read off the atlas at eps0 = 0.85 and
+    L = 60 mm off the one at L = 55 mm (the nearest in log L, p log eps0)."""
+    res = predict_case(case_from_dict({"rods": {"h": 0.3, "E_B": 1000.0},
+                                       "release": {"eps0": 0.8}}))
+    assert res["atlas"] == "single_rod_grid/L100_eps0-0.85"
+    assert res["scaled"]["L"] == 100.0 and res["scaled"]["eps0"] == 0.85
+    res = predict_case(case_from_dict({"rods": {"h": 0.3, "L": 60.0, "E_B": 1000.0},
+                                       "release": {"eps0": 0.55}}))
+    assert res["atlas"] == "single_rod_grid/L55_eps0-0.5"
+    assert res["scaled"]["length_factor"] == pytest.approx(60.0 / 55.0)
