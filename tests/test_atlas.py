@@ -92,3 +92,24 @@ def test_a_sweep_over_h_and_s_makes_an_atlas_and_others_are_refused(tmp_path: Pa
     assert bad.exit_code != 0
     assert "imperfection.amplitude" in bad.output and "Traceback" not in bad.output
     assert not (tmp_path / "printed.csv").exists()
+
+
+def test_a_refined_row_answers_a_design_at_its_thickness() -> None:
+    """A diagram refined at the thin end (a row with few gaps between full rows): a design
+    is read off the simulated thickness nearest its h, even where another row has its gap;
+    the slack past the ends is half the step at that end."""
+    rows = []
+    for h, n in ((0.1, 15), (0.2, 9)):
+        rows += [{"h": h, "s": s, "n": n} for s in (0.0, 10.0, 20.0, 30.0, 40.0)]
+    rows += [{"h": 0.15, "s": s, "n": 13} for s in (0.0, 40.0)]
+    table = pd.DataFrame([{"status": "ok", "seed": 0, "family": "coherent", "n_mode": r["n"],
+                           "l_mean": 100.0 / r["n"], "lam_mean": 1.0, "a_mean": 1.0, "N": 5,
+                           "b": 1.0, "L": 100.0, "eps0": 0.5, "E_B": 1000.0, "E": 0.45,
+                           "t": 0.4, **r} for r in rows])
+    atlas = build_atlas(table)
+    assert atlas.meta["h_step"] == 0.05
+    here = locate(atlas, h=0.14, s=28.0, N=5, L=100.0, eps0=0.5)
+    assert (here.h, here.s, here.n) == (0.15, 40.0, 13)  # not (0.1, 30): h decides n
+    assert locate(atlas, h=0.08, s=10.0).inside  # within half the end step (0.05) of 0.1
+    assert not locate(atlas, h=0.07, s=10.0).inside
+    assert locate(atlas, h=0.2, s=44.0).inside and not locate(atlas, h=0.2, s=46.0).inside

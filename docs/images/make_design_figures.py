@@ -42,15 +42,36 @@ def _five(h: float, s: float) -> dict:
             "release": {"eps0": 0.5}}
 
 
+def _gaps(values) -> dict[float, float]:
+    """Per simulated value, the gap to its nearest simulated neighbour."""
+    u = np.unique(np.asarray(values, dtype=float))
+    if u.size < 2:
+        return {float(v): 1.0 for v in u}
+    d = np.diff(u)
+    near = np.minimum(np.r_[np.inf, d], np.r_[d, np.inf])
+    return {float(v): float(g) for v, g in zip(u, near, strict=True)}
+
+
 def atlas_figure(out: Path) -> Path:
     atlas = load_atlas(ATLAS_FILE)
     pts = atlas.points
     fig, ax = plt.subplots(figsize=(8.0, 5.6))
-    for fam, d in pts.groupby("family"):
-        ax.scatter(d["s"], d["h"], s=150, marker="s", color=COLOURS.get(fam, "k"),
-                   alpha=0.55, label=f"{fam} (simulated)", edgecolors="none")
+    # each point a cell as large as the gaps to its simulated neighbours (the thin end has
+    # refined rows)
+    h_gap = {s: _gaps(d["h"]) for s, d in pts.groupby("s")}  # along each column
+    s_gap = {h: _gaps(d["s"]) for h, d in pts.groupby("h")}  # along each row
+    seen = set()
     for _, r in pts.iterrows():
-        ax.text(r["s"], r["h"], str(int(r["n"])), ha="center", va="center", fontsize=6)
+        w = 0.85 * min(s_gap[r["h"]][r["s"]], atlas.meta["s_step"])
+        t = 0.85 * h_gap[r["s"]][r["h"]]
+        fam = str(r["family"])
+        ax.add_patch(plt.Rectangle((r["s"] - w / 2, r["h"] - t / 2), w, t, lw=0,
+                                   color=COLOURS.get(fam, "k"), alpha=0.55,
+                                   label=None if fam in seen else f"{fam} (simulated)"))
+        seen.add(fam)
+        ax.text(r["s"], r["h"], str(int(r["n"])), ha="center", va="center",
+                fontsize=6 if t >= 0.05 else 4)
+    ax.autoscale_view()
     for h, s in DESIGNS:
         p = predict_case(case_from_dict(_five(h, s)))
         n = p["rods"][len(p["rods"]) // 2]["n"]

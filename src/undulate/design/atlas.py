@@ -175,13 +175,24 @@ def _bracket(values: pd.Series, v: float) -> list[float]:
     return [float(x) for x in ((lo.max(),) if lo.size else ()) + ((hi.min(),) if hi.size else ())]
 
 
+def _end_slack(values: pd.Series) -> tuple[float, float]:
+    """Half the simulated step at each end of an axis (how far past its ends a design still
+    counts as inside)."""
+    u = np.unique(values.to_numpy(dtype=float))
+    if u.size < 2:
+        return 0.5, 0.5
+    return 0.5 * float(u[1] - u[0]), 0.5 * float(u[-1] - u[-2])
+
+
 def locate(atlas: Atlas, *, h: float, s: float, **case: float) -> Location:
     """Where a design (h, s and the values in ``case``: N, L, eps0, E_B, E, t, b) sits.
 
     Inside means: every value of ``case`` the atlas held fixed within 2 %, and (h, s) within
-    the swept ranges (half a grid step of slack). The nearest point is the nearest in grid
-    steps; its alternatives are the other (family, n) at the corners of the grid cell that
-    holds the design (none where the design is a simulated point itself).
+    the swept ranges (half the end step of slack). The nearest point is on the simulated
+    thickness nearest h, at the gap nearest s among that thickness's points (n follows h far
+    more than s; a refined diagram has rows with fewer gaps); its alternatives are the
+    other (family, n) at the corners of the grid cell that holds the design (none where the
+    design is a simulated point itself).
     """
     m = atlas.meta
     reasons = []
@@ -192,14 +203,17 @@ def locate(atlas: Atlas, *, h: float, s: float, **case: float) -> Location:
                 continue  # s = 0: one rod N times as wide, whatever N and b
             if abs(float(v) - ref) > _REL_TOL * max(abs(ref), 1e-12):
                 reasons.append(f"{k} = {v:g}, the diagram's {k} = {ref:g}")
-    hs, ss = m.get("h_step") or 1.0, m.get("s_step") or 1.0
-    for name, v, (lo, hi), step in (("h", h, m["h_range"], hs), ("s", s, m["s_range"], ss)):
-        if v < lo - 0.5 * step or v > hi + 0.5 * step:
-            reasons.append(f"{name} = {v:g} mm, simulated {lo:g}..{hi:g} mm")
     p = atlas.points
-    dist = np.hypot((p["h"] - h) / hs, (p["s"] - s) / ss)
-    k = int(np.argmin(dist.to_numpy()))
-    near = p.iloc[k]
+    for name, v, (lo, hi) in (("h", h, m["h_range"]), ("s", s, m["s_range"])):
+        below, above = _end_slack(p[name])
+        if v < lo - below or v > hi + above:
+            reasons.append(f"{name} = {v:g} mm, simulated {lo:g}..{hi:g} mm")
+    hs, ss = m.get("h_step") or 1.0, m.get("s_step") or 1.0
+    rows = np.unique(p["h"].to_numpy(dtype=float))
+    row = p[np.isclose(p["h"], rows[np.argmin(np.abs(rows - h))], rtol=0.0, atol=1e-12)]
+    k = int(np.argmin(np.abs(row["s"].to_numpy(dtype=float) - s)))
+    near = row.iloc[k]
+    distance = float(np.hypot((near["h"] - h) / hs, (near["s"] - s) / ss))
     # the cell around the design: the simulated h on either side, then the simulated s on
     # either side among those (a grid still being filled need not have every s at every h)
     col = p[p["h"].isin(_bracket(p["h"], h))]
@@ -209,5 +223,5 @@ def locate(atlas: Atlas, *, h: float, s: float, **case: float) -> Location:
                   - {here})
     return Location(inside=not reasons, reason="; ".join(reasons), h=float(near["h"]),
                     s=float(near["s"]), family=here[0], n=here[1], alternatives=alts,
-                    distance=float(dist.iloc[k]), l=float(near["l"]), lam=float(near["lam"]),
+                    distance=distance, l=float(near["l"]), lam=float(near["lam"]),
                     a=float(near["a"]))
