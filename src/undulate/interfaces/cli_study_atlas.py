@@ -4,9 +4,16 @@ the data `undulate predict` answers from."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
+
+from .common import fail
+
+
+def _fail(msg: str) -> NoReturn:
+    raise fail(msg)
+
 
 #: what a SWEEP.toml study may sweep to make an atlas (one row per h, s) ...
 _ATLAS_SWEEP = frozenset({"rods.h", "rods.s", "imperfection.seed"})
@@ -37,7 +44,6 @@ def atlas_cmd(
 
     from undulate.design.atlas import build_atlas, write_atlas
 
-    from .cli_study import _fail, _out
 
     tables, setups, swept = [], [], set()
     for directory in directories:
@@ -64,8 +70,7 @@ def atlas_cmd(
         except (ValueError, KeyError) as err:
             _fail(f"{' '.join(map(str, directories))}: {err}")
         path = write_atlas(atlas, out / f"{label}.csv" if label else out)
-        _out.print(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs",
-                   highlight=False, soft_wrap=True)
+        typer.echo(f"{path}: {atlas.meta['points']} points from {atlas.meta['runs']} runs")
 
 
 def _atlas_table(directory: Path) -> tuple[Any, Any, set[str]]:
@@ -75,7 +80,6 @@ def _atlas_table(directory: Path) -> tuple[Any, Any, set[str]]:
 
     from undulate.study.storage import collect, read_study
 
-    from .cli_study import _fail
 
     if directory.is_file() and directory.suffix == ".csv":
         return pd.read_csv(directory), None, set()
