@@ -12,6 +12,7 @@ outcomes seen around the design are listed); outside, eq. (1) and the phase map 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,16 +35,21 @@ def _atlases() -> list[tuple[str, Atlas]]:
     """The shipped atlases with their names (the file's path in the data folder, without
     ``.csv``): the single-rod sweep, the five-rod diagram, then every further atlas CSV in
     the data folder and its sub-folders (the diagram at another rod length, single rods over
-    L and eps0)."""
-    data = SINGLE_ROD_FILE.parent
-    more = sorted(p for p in data.rglob("*.csv") if p not in (SINGLE_ROD_FILE, ATLAS_FILE))
+    L and eps0). The folder is listed once per process."""
+    return list(_atlases_of(SINGLE_ROD_FILE, ATLAS_FILE))
+
+
+@functools.cache
+def _atlases_of(single: Path, diagram: Path) -> tuple[tuple[str, Atlas], ...]:
+    data = single.parent
+    more = sorted(p for p in data.rglob("*.csv") if p not in (single, diagram))
     out = []
-    for path in (SINGLE_ROD_FILE, ATLAS_FILE, *more):
+    for path in (single, diagram, *more):
         try:
             out.append((path.relative_to(data).with_suffix("").as_posix(), shipped_atlas(path)))
         except (OSError, ValueError):
             continue
-    return out
+    return tuple(out)
 
 
 def atlas_named(name: str) -> Atlas:
@@ -64,6 +70,22 @@ class Placement:
     atlas: Atlas
     loc: Location
     scaled: dict[str, Any] | None = None
+
+    @property
+    def confidence(self) -> str:
+        """The location's confidence; "scaled" for a scaled one whose neighbours agree."""
+        c = self.loc.confidence
+        return "scaled" if self.scaled is not None and c == "simulated" else c
+
+    def summary(self) -> str:
+        """The location's summary line, saying where a scaled design was carried from."""
+        sc = self.scaled
+        if sc is None:
+            return self.loc.summary()
+        where = f"h' = {sc['h']:.3g} mm" + (f", s' = {sc['s']:.3g} mm" if sc["s"] is not None
+                                             else "")
+        return (f"scaled from the simulated L = {sc['L']:g} mm, eps0 = {sc['eps0']:g} "
+                f"({where}): {self.loc.summary()}")
 
 
 def atlas_distance(L: float, eps0: float, meta: dict[str, Any]) -> float:
@@ -216,11 +238,7 @@ def _scaled_answer(pl: Placement, case: Any, warnings: list[str],
     lam = loc.lam * k * (1.0 + sc["eps0"]) / (1.0 + eps0)
     rod = {"n": loc.n, "l": loc.l * k, "lam": lam, "a": loc.a * k}
     family = decide_family(1, lam=lam, a=rod["a"]) if loc.n == 1 else loc.family
-    where = f"h' = {sc['h']:.3g} mm" + (f", s' = {sc['s']:.3g} mm" if sc["s"] is not None
-                                         else "")
     out = _simulated(pl, warnings, n_rods)
     out.update(family=family, rods=[{"index": j, **rod} for j in range(n_rods)],
-               confidence="scaled" if loc.confidence == "simulated" else loc.confidence,
-               summary=f"scaled from the simulated L = {sc['L']:g} mm, eps0 = "
-                       f"{sc['eps0']:g} ({where}): {loc.summary()}", scaled=sc)
+               confidence=pl.confidence, summary=pl.summary(), scaled=sc)
     return out

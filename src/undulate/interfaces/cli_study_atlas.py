@@ -44,7 +44,6 @@ def atlas_cmd(
 
     from undulate.design.atlas import build_atlas, write_atlas
 
-
     tables, setups, swept = [], [], set()
     for directory in directories:
         table, setup, keys = _atlas_table(directory)
@@ -79,7 +78,6 @@ def _atlas_table(directory: Path) -> tuple[Any, Any, set[str]]:
     import pandas as pd
 
     from undulate.study.storage import collect, read_study
-
 
     if directory.is_file() and directory.suffix == ".csv":
         return pd.read_csv(directory), None, set()

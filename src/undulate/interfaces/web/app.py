@@ -274,12 +274,10 @@ def _locate_groups(out: dict[str, Any], p: Params) -> None:
                                                "atlas": best.name}
             continue
         # another L or eps0: the design drawn where it sits on that diagram once scaled
-        sloc, sc = scaled.loc, scaled.scaled or {}
-        g["atlas"] = sloc.to_dict() | {
+        sc = scaled.scaled or {}
+        g["atlas"] = scaled.loc.to_dict() | {
             "design_h": sc["h"], "design_s": sc["s"], "scaled": sc, "atlas": scaled.name,
-            "confidence": "scaled" if sloc.confidence == "simulated" else sloc.confidence,
-            "summary": f"scaled from the simulated L = {sc['L']:g} mm, eps0 = {sc['eps0']:g} "
-                       f"(h' = {sc['h']:.3g} mm, s' = {sc['s']:.3g} mm): {sloc.summary()}"}
+            "confidence": scaled.confidence, "summary": scaled.summary()}
 
 
 def create_app(jobs_dir: str | Path = "undulate-jobs", workers: int = 1,
