@@ -101,3 +101,17 @@ def test_the_atlas_at_the_nearest_rod_length_answers(tmp_path: Path,
     assert near["scaled"]["L"] == 50.0
     far = predict_case(_case(N=5, h=0.3, s=10.0, L=90.0))
     assert far["scaled"]["L"] == 100.0
+
+
+def test_one_rod_as_wide_as_five_is_the_diagrams_s0_column() -> None:
+    """Five rods printed with no gap are one rod five times as wide (how the studies run
+    s = 0): such a rod is answered from the five-rod diagram's s = 0 column, not from the
+    lone rods of width 1 mm (nor from theory)."""
+    from undulate.design.atlas import ATLAS_FILE
+
+    pts = load_atlas(ATLAS_FILE).points
+    row = pts[pts["s"] == 0].iloc[0]
+    wide = predict_case(_case(h=float(row["h"]), b=5.0, N=1, s=0.0))
+    assert wide["source"] == "simulation" and wide["atlas"] == "phase_diagram"
+    assert wide["rods"][0]["n"] == row["n"] and len(wide["rods"]) == 1
+    assert predict_case(_case(h=float(row["h"]), N=1))["atlas"] != "phase_diagram"

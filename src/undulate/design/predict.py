@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .. import theory as T
 from ..model.families import decide_family
 from .atlas import ATLAS_FILE, Atlas, Location, locate, shipped_atlas
@@ -109,9 +111,12 @@ def place(*, h: float, s: float, N: int, L: float, eps0: float,
     scaled: list[tuple[float, Placement]] = []
     for name, atlas in _atlases() if atlases is None else atlases:
         single = atlas.meta.get("N") == 1
-        if single != (N == 1):
+        if _bundle_of(atlas, N, moduli.get("b")):
+            s_at = 0.0  # one rod as wide as the atlas's N rods: their s = 0 column
+        elif single != (N == 1):
             continue
-        s_at = float(atlas.points["s"].iloc[0]) if single else s
+        else:
+            s_at = float(atlas.points["s"].iloc[0]) if single else s
         loc = locate(atlas, h=h, s=s_at, N=N, L=L, eps0=eps0, **moduli)
         if best is None or (loc.inside and not best.loc.inside):
             best = Placement(name, atlas, loc)
@@ -121,6 +126,17 @@ def place(*, h: float, s: float, N: int, L: float, eps0: float,
             scaled.append((atlas_distance(L, eps0, atlas.meta),
                            Placement(name, atlas, *carried)))
     return best, (min(scaled, key=lambda c: c[0])[1] if scaled else None)
+
+
+def _bundle_of(atlas: Atlas, N: int, b: float | None) -> bool:
+    """Whether one rod of width ``b`` is the N rods of a several-rod atlas printed with no
+    gap (s = 0: they act as one rod N times as wide), which that atlas simulated."""
+    m = atlas.meta
+    if N != 1 or b is None or int(m.get("N", 1)) < 2 or "b" not in m:
+        return False
+    wide = int(m["N"]) * float(m["b"])
+    return (abs(b - wide) <= 0.02 * wide
+            and bool(np.isclose(atlas.points["s"], 0.0, rtol=0.0, atol=1e-9).any()))
 
 
 def _theory(case: Any) -> dict[str, Any]:
