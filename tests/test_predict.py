@@ -115,3 +115,19 @@ def test_one_rod_as_wide_as_five_is_the_diagrams_s0_column() -> None:
     assert wide["source"] == "simulation" and wide["atlas"] == "phase_diagram"
     assert wide["rods"][0]["n"] == row["n"] and len(wide["rods"]) == 1
     assert predict_case(_case(h=float(row["h"]), N=1))["atlas"] != "phase_diagram"
+
+
+def test_five_rods_at_another_pre_stretch_are_answered_from_their_own_diagram() -> None:
+    """The five-rod diagrams at L = 75 mm, eps0 = 0.25 and 0.85 ship: a design on one of
+    their points is answered from it directly (rolls at eps0 = 0.85, which no eps0 = 0.5
+    diagram has)."""
+    from undulate.design.predict import atlas_named
+
+    at = atlas_named("five_rods_eps0/L75_eps0-0.85")
+    assert (at.meta["N"], at.meta["L"], at.meta["eps0"]) == (5, 75.0, 0.85)
+    row = at.points[at.points["family"] == "rolls"].iloc[0]
+    case = case_from_dict({"rods": {"E_B": 1000.0, "N": 5, "L": 75.0, "h": float(row["h"]),
+                                    "s": float(row["s"])}, "release": {"eps0": 0.85}})
+    res = predict_case(case)
+    assert res["atlas"] == "five_rods_eps0/L75_eps0-0.85" and "scaled" not in res
+    assert res["family"] == "rolls" and len(res["rods"]) == 5

@@ -386,17 +386,17 @@ def test_atlas_and_where_a_group_sits(client: TestClient) -> None:
     # shorter lines: the group is drawn where it sits once scaled (h' of the same number of
     # half-waves on the rod, s' = s L_ref / L), on the diagram simulated at the nearest L
     close = (-10.0, -5.0, 0.0, 5.0, 10.0)  # gap 4 mm: thin lines still act as a group
-    short = [{"points": [[-0.375 * m["L"], y], [0.375 * m["L"], y]]} for y in close]
+    short = [{"points": [[-0.45 * m["L"], y], [0.45 * m["L"], y]]} for y in close]
     sc = client.post("/api/predict", json=body | {"lines": short, "h": 0.25}).json()
     at = sc["groups"][0]["atlas"]
     assert at["inside"] and at["confidence"] in ("scaled", "near a transition")
     from undulate.design.scaling import load_scaling
 
-    k = load_scaling()  # the rods' own half-wave l0 = c0 + c1 h grows by 4/3: the same x
-    h_eq = ((k.c0 + k.c1 * 0.25) / 0.75 - k.c0) / k.c1
+    k = load_scaling()  # the rods' own half-wave l0 = c0 + c1 h grows by 1/0.9: the same x
+    h_eq = ((k.c0 + k.c1 * 0.25) / 0.9 - k.c0) / k.c1
     assert at["atlas"] == "phase_diagram"
-    assert at["design_h"] == pytest.approx(h_eq) and at["design_s"] == pytest.approx(4 / 0.75)
-    assert at["scaled"]["length_factor"] == pytest.approx(0.75)
+    assert at["design_h"] == pytest.approx(h_eq) and at["design_s"] == pytest.approx(4 / 0.9)
+    assert at["scaled"]["length_factor"] == pytest.approx(0.9)
     assert "scaled from the simulated L = 100 mm" in at["summary"]
     # half as long: the diagram simulated at L = 50 mm holds it, and the page can fetch it
     half = [{"points": [[-m["L"] / 4, y], [m["L"] / 4, y]]} for y in close]
