@@ -91,3 +91,23 @@ def test_material_defaults_are_set_once():
     run = get_preset("single-rod-h", setup="bare").runs[0].case
     assert (run["rods"]["b"], run["rods"]["E_B"], run["fabric"]["E"], run["fabric"]["t"]) == \
         tuple(MATERIAL_DEFAULTS[k] for k in ("b", "E_B", "E", "t"))
+
+
+def test_the_default_rod_spacing_resolves_thin_rods_waves() -> None:
+    """Without mesh.dx_rod a rod gets 1 mm, or 1/2, 1/3, 1/4 mm when eq. (1)'s half-wave
+    would span fewer than 8 nodes; a given spacing is kept; a pattern takes its thinnest
+    line."""
+    from undulate.model import case_from_dict
+    from undulate.model.numerics import auto_dx_rod
+
+    def dx(**kw) -> float:
+        return case_from_dict({"rods": {"E_B": 1000.0, **kw.pop("rods", {})}, **kw}).mesh.dx_rod
+
+    assert dx(rods={"h": 0.3}) == 1.0 and dx(rods={"h": 0.15}) == 0.5
+    assert dx(rods={"h": 0.08}, release={"eps0": 0.85}) == 0.25
+    assert dx(rods={"h": 0.15}, mesh={"dx_rod": 1.0}) == 1.0
+    thick = auto_dx_rod(0.15, 0.5, b=1.0, E_B=3000.0, E=0.45, t=0.4)
+    assert thick > auto_dx_rod(0.15, 0.5, b=1.0, E_B=1000.0, E=0.45, t=0.4)
+    lines = {"lines": [{"points": [[0, 0], [60, 0]], "h": 0.3},
+                       {"points": [[0, 10], [60, 10]], "h": 0.1}]}
+    assert dx(rods={"h": 0.3}, pattern=lines) == 0.5

@@ -361,3 +361,26 @@ def test_workers_end_with_a_killed_driver(tmp_path: Path) -> None:
     for p in alive:  # clean up before failing
         os.kill(p, signal.SIGKILL)
     assert not alive, f"workers {alive} ran on after their driver was killed"
+
+
+def test_a_run_made_on_another_rod_spacing_is_run_again(tmp_path: Path) -> None:
+    """The default rod spacing depends on the rods (finer for thin ones): a finished run
+    whose record holds another spacing than its case resolves to now is a result of another
+    mesh, and resuming the study runs it again; the others stay."""
+    from undulate.model import case_from_dict
+
+    study = build_study("t", {"rods": {"N": 1, "L": 60.0, "E_B": 1000.0}},
+                        {"rods.h": [0.1, 0.6]}, kind="sweep")
+    assert [case_from_dict(r.case).mesh.dx_rod for r in study.runs] == [0.5, 1.0]
+    run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    assert (s.ran, s.stale, s.skipped_ok) == (0, 0, 2)
+    thin = next(r for r in study.runs if r.case["rods"]["h"] == 0.1)
+    path = tmp_path / "runs" / f"{thin.id}.json"
+    rec = json.loads(path.read_text())
+    rec["case_resolved"]["mesh"]["dx_rod"] = 1.0  # as made before the finer default
+    atomic_write_json(path, rec)
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    assert (s.ran, s.stale, s.skipped_ok) == (1, 1, 1)
+    again = read_record(path)
+    assert again["case_resolved"]["mesh"]["dx_rod"] == 0.5 and again["attempt"] == 2

@@ -125,6 +125,8 @@ def _run(study: Study, out: Path, *, runner: str | None, workers: int | None,
     _err.print(
         f"ran {summary.ran} ({summary.ok} ok, {summary.failed} failed) in {summary.wall_s:.1f} s;"
         f" skipped {summary.skipped_ok} done"
+        + (f" ({summary.stale} finished runs run again: their rod spacing is not today's "
+           "default)" if summary.stale else "")
         + (f", {summary.skipped_failed} failed (use --retry-failed)" if summary.skipped_failed
            else "")
         + (f"; table: {summary.table}" if summary.table else ""),

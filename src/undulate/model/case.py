@@ -11,7 +11,7 @@ from pydantic import Field, model_validator
 from . import geometry
 from .lines import Pattern, PrintedRod
 from .materials import Fabric, Rods
-from .numerics import Dynamics, MeshOptions, SolverOptions
+from .numerics import Dynamics, MeshOptions, SolverOptions, auto_dx_rod
 from .release import Gravity, Hang, Imperfection, Release
 from .rules import check_case
 from .validators import _Strict
@@ -47,8 +47,22 @@ class Case(_Strict):
 
     @model_validator(mode="after")
     def _rules(self) -> Case:
+        if "dx_rod" not in self.mesh.model_fields_set:
+            dx = min(auto_dx_rod(h, self.release.eps0, b=b, E_B=self.rods.E_B,
+                                 E=self.fabric.E, t=self.fabric.t) for h, b in self._sections())
+            if dx != self.mesh.dx_rod:
+                self.mesh.dx_rod = dx
         check_case(self)
         return self
+
+    def _sections(self) -> list[tuple[float, float]]:
+        """(h, b) of every rod: [rods], or each line and array of the pattern."""
+        r = self.rods
+        if self.pattern is None:
+            return [(r.h, r.b)]
+        items = [*self.pattern.lines, *self.pattern.arrays]
+        return [(it.h if it.h is not None else r.h, it.b if it.b is not None else r.b)
+                for it in items] or [(r.h, r.b)]
 
     # ---- derived geometry (undulate.model.geometry) ------------------------------------
     def rod_paths(self) -> list[PrintedRod]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from pydantic import (
@@ -25,7 +26,10 @@ class MeshOptions(_Strict):
     kind: Literal["unstructured", "structured"] = Field(
         "unstructured", description="unstructured (Triangle) or structured (tensor grid) mesh"
     )
-    dx_rod: float = Field(1.0, gt=0.0, le=20.0, description="node spacing along rods [mm]")
+    dx_rod: float = Field(
+        1.0, gt=0.0, le=20.0,
+        description="node spacing along rods [mm]; if not given: 1 mm, or 1/2, 1/3, 1/4 mm "
+        "for rods so thin that a half-wave of eq. (1) would span fewer than 8 nodes")
     dx_far: float = Field(
         4.0, gt=0.0, le=100.0, description="structured: spacing in x beyond rod ends [mm]"
     )
@@ -85,3 +89,26 @@ class Dynamics(_Strict):
     damping: float = Field(
         5.0, ge=0.0, le=1e6, description="mass-proportional damping coefficient [1/s]"
     )
+
+
+#: nodes per half-wave the default rod spacing gives at least, counted on eq. (1)'s
+#: half-wave length (0.7-0.85 of the simulated one): with fewer, the arcs of thin rods are
+#: 4-7 nodes long, the arc-chain fit fails ("noisy") and n comes out wrong
+#: (docs/studies/predict-data/README.md, "thin-mesh")
+NODES_PER_HALF_WAVE = 8
+#: the spacings the default chooses from [mm]: 1 / k, so that rods of one sweep share few
+#: mesh sizes
+DX_ROD_LADDER = (1.0, 0.5, 1.0 / 3.0, 0.25)
+
+
+def auto_dx_rod(h: float, eps0: float, *, b: float, E_B: float, E: float, t: float) -> float:
+    """The default node spacing along a rod [mm]: the largest of 1, 1/2, 1/3, 1/4 mm that
+    puts at least :data:`NODES_PER_HALF_WAVE` nodes on a half-wave of eq. (1),
+    l = (24 sqrt(6) E_B I / (E t))^(1/3) eps0^(-1/2) with I = b h^3 / 12 (1/4 mm for
+    anything thinner)."""
+    inertia = b * h**3 / 12.0
+    l_half = (24.0 * math.sqrt(6.0) * E_B * inertia / (E * t)) ** (1.0 / 3.0) / math.sqrt(eps0)
+    for dx in DX_ROD_LADDER:
+        if l_half >= NODES_PER_HALF_WAVE * dx:
+            return dx
+    return DX_ROD_LADDER[-1]

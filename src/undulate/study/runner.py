@@ -18,6 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
+from ..model import case_from_dict
+from ..model.numerics import MeshOptions
 from .execute import (  # re-exported: a study's runs by one address
     ENGINE_PARTS,
     RUNNER_ENV,
@@ -53,6 +55,7 @@ class RunSummary:
     total: int
     skipped_ok: int = 0
     skipped_failed: int = 0
+    stale: int = 0  # finished runs run again: their rod spacing is not today's default
     ran: int = 0
     ok: int = 0
     failed: int = 0
@@ -65,6 +68,20 @@ class RunSummary:
     def pending(self) -> int:
         """Runs of the study still without a record (or skipped failures)."""
         return self.total - self.skipped_ok - self.skipped_failed - self.ran
+
+
+def _stale_mesh(prev: dict[str, Any], r: RunSpec) -> bool:
+    """Whether a finished run was made on another rod spacing than its case gets now: the
+    default ``mesh.dx_rod`` depends on the rods (finer for thin ones, since 2026-12-07), and
+    a record of the old spacing is a result of another mesh. Records without a resolved
+    case were made with the 1 mm default."""
+    old = ((prev.get("case_resolved") or {}).get("mesh") or {}).get(
+        "dx_rod", MeshOptions.model_fields["dx_rod"].default)
+    try:
+        now = case_from_dict(r.case).mesh.dx_rod
+    except ValueError:  # an invalid case fails when it runs, with its own message
+        return False
+    return abs(float(old) - now) > 1e-9
 
 
 class _Progress:
@@ -207,8 +224,12 @@ def run_study(
         if prev is None:
             todo.append(r)
             attempts[r.id] = 1
-        elif prev["status"] == "ok":
+        elif prev["status"] == "ok" and not _stale_mesh(prev, r):
             summary.skipped_ok += 1
+        elif prev["status"] == "ok":
+            todo.append(r)
+            attempts[r.id] = int(prev.get("attempt") or 1) + 1
+            summary.stale += 1
         elif retry_failed:
             todo.append(r)
             attempts[r.id] = int(prev.get("attempt") or 1) + 1
