@@ -363,7 +363,7 @@ def test_workers_end_with_a_killed_driver(tmp_path: Path) -> None:
     assert not alive, f"workers {alive} ran on after their driver was killed"
 
 
-def test_a_run_made_on_another_rod_spacing_is_run_again(tmp_path: Path) -> None:
+def test_a_run_made_on_another_rod_spacing_is_run_again(tmp_path: Path, capsys) -> None:
     """The default rod spacing depends on the rods (finer for thin ones): a finished run
     whose record holds another spacing than its case resolves to now is a result of another
     mesh, and resuming the study runs it again; the others stay."""
@@ -380,7 +380,9 @@ def test_a_run_made_on_another_rod_spacing_is_run_again(tmp_path: Path) -> None:
     rec = json.loads(path.read_text())
     rec["case_resolved"]["mesh"]["dx_rod"] = 1.0  # as made before the finer default
     atomic_write_json(path, rec)
-    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=False)
+    capsys.readouterr()
+    s = run_study(study, tmp_path, run_fn=fakes.fake_run, workers=1, progress=True)
     assert (s.ran, s.stale, s.skipped_ok) == (1, 1, 1)
+    assert "1 finished runs run again" in capsys.readouterr().err
     again = read_record(path)
     assert again["case_resolved"]["mesh"]["dx_rod"] == 0.5 and again["attempt"] == 2

@@ -239,6 +239,9 @@ def run_study(
     def artifact_dir(r: RunSpec) -> str | None:
         return str(out / "artifacts" / r.id) if artifacts else None
 
+    if summary.stale and progress:
+        print(f"study: {summary.stale} finished runs run again: they were made on another rod "
+              "spacing than their case gets now (mesh.dx_rod)", file=sys.stderr, flush=True)
     bar = _Progress(len(study.runs), summary.skipped_ok + summary.skipped_failed,
                     progress, console)
 
