@@ -7,8 +7,8 @@ variable,
     x = L / (l0(h) (eps0 / eps0_ref)^(-p)),     l0(h) = c0 + c1 h,
 
 the number of the rod's own half-wave lengths that fit on it. l0 is the half-wave length of
-rods with many waves (n >= 7 in the thickness sweep, where the ends do not set it: l = 1.97 +
-41.0 h mm on the reference set-up), and the pre-stretch enters more weakly than eq. (1)'s
+rods with many waves (n >= 7 in the thickness sweep, where the ends do not set it: l = 1.89 +
+41.4 h mm on the reference set-up), and the pre-stretch enters more weakly than eq. (1)'s
 eps0^(-1/2): the simulated l changes with eps0 far less than eq. (1) says
 (docs/studies/reproduction.md). c0, c1 and p are fitted on the single-rod tables
 (:func:`fit_wavelength`; :func:`fit_exponent`: the thickness sweep at eps0_ref gives n(x),
