@@ -50,6 +50,26 @@ def test_curved_budget_counts_only_steps_along_the_watched_unknowns():
                     watch=on_mode).converged
 
 
+def test_curved_limit_stops_after_that_many_watched_curved_steps():
+    """``curved_limit``: minimize gives up (``stalled``) once that many steps have followed
+    negative curvature of the watched unknowns, whatever the iteration count (the release
+    loop's limit for a step whose rods wander from one unstable state to the next); steps
+    along other unknowns' negative curvature do not count, and 0 means no limit."""
+    asm = _pair(0.02)  # the saddle: one curved step along x0 - x1 leaves it
+    x0 = np.zeros((2, 3))
+    on_mode = np.zeros(6, bool)
+    on_mode[[0, 3]] = True
+    stopped = minimize(asm, x0, asm.free(x0), NewtonOptions(rtol=1e-10, curved_limit=1),
+                       watch=on_mode)
+    assert not stopped.converged and stopped.stalled and not stopped.over_budget
+    assert stopped.watched_steps == 1 and stopped.message.startswith("no settling")
+    for opts, watch in ((NewtonOptions(rtol=1e-10, curved_limit=1), ~on_mode),
+                        (NewtonOptions(rtol=1e-10, curved_limit=2), on_mode),
+                        (NewtonOptions(rtol=1e-10, curved_limit=0), on_mode)):
+        res = minimize(asm, x0, asm.free(x0), opts, watch=watch)
+        assert res.converged and not res.stalled and res.negative_steps == 1
+
+
 def test_definite_start_gives_up_at_once_on_an_unstable_start():
     """``definite_start``: a start whose Hessian has negative pivots ends before any iteration
     (the release loop then halves its grown step); a stable start is solved as usual."""

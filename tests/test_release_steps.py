@@ -113,6 +113,21 @@ def test_long_steps_that_change_pattern_are_taken_again_in_halves(monkeypatch):
     assert api.simulate(case_from_dict(data)).stats["snap_cuts"] == 0
 
 
+def test_steps_whose_rods_do_not_settle_are_taken_again_in_halves():
+    """A release step that can still be halved may follow negative curvature of the rods
+    stall_curved_steps times; one that needs more is cut in halves (``stall_cuts``) instead of
+    running on to solver.max_iter, and the run still ends released. 0: no such limit."""
+    limit = 1  # a thin rod: its onset is a bifurcation, passed along the rods' curvature
+    data = {**SMALL, "rods": {**SMALL["rods"], "h": 0.1},
+            "release": {**SMALL["release"], "stall_curved_steps": limit}}
+    r = api.simulate(case_from_dict(data))
+    assert r.history[-1]["release_strain"] == pytest.approx(0.5)
+    assert r.stats["stall_cuts"] > 0
+    assert r.stats["step_cuts"] >= r.stats["stall_cuts"]
+    data["release"]["stall_curved_steps"] = 0
+    assert api.simulate(case_from_dict(data)).stats["stall_cuts"] == 0
+
+
 def test_snap_budget_off_without_adaptive_steps():
     """With adaptive = false the increments stay as given (no cuts of any kind)."""
     data = {**SMALL, "release": {**SMALL["release"], "adaptive": False, "snap_iterations": 1}}

@@ -54,6 +54,13 @@ class Release(_Strict):
         "halves, so the new pattern grows from just past the strain where the old one ends "
         "(with adaptive)",
     )
+    stall_curved_steps: int = Field(
+        50, ge=0, le=100000,
+        description="steps along negative curvature of the rods a release step may take while "
+        "it can still be halved (with adaptive); one that needs more, its rods passing from "
+        "one unstable state to the next without settling, is taken again in halves (0: no "
+        "limit, the step runs to solver.max_iter)",
+    )
     snap_resolution: float = Field(
         1.0, gt=0.0, le=100.0,
         description="increment, as a fraction of the nominal one, down to which steps with a "

@@ -92,10 +92,11 @@ class _State:
     trace: list = field(default_factory=list)
 
     def result(self, converged: bool, it: int, message: str = "",
-               over_budget: bool = False, unstable_start: bool = False) -> NewtonResult:
+               over_budget: bool = False, unstable_start: bool = False,
+               stalled: bool = False) -> NewtonResult:
         return NewtonResult(self.u, converged, it, self.res, self.E, self.n_neg,
                             self.neg_steps, dict(self.times), message, self.trace,
-                            self.watched_steps, over_budget, unstable_start)
+                            self.watched_steps, over_budget, unstable_start, stalled)
 
 
 def minimize(asm: Assembly, x_fixed: np.ndarray, u0: np.ndarray,
@@ -179,7 +180,8 @@ def _assemble_and_factor(asm: Assembly, solver, st: _State, tol: float) -> tuple
 
 
 def _give_up(st: _State, opts: NewtonOptions, it: int) -> NewtonResult | None:
-    """The release loop's early stops: an unstable start, a change of pattern over budget."""
+    """The release loop's early stops: an unstable start, a change of pattern over budget,
+    rods that keep following negative curvature without settling."""
     if opts.definite_start and it == 0 and st.n_neg != 0:
         return st.result(False, it, f"the start is not stable ({_pivots(st.n_neg)})",
                          unstable_start=True)
@@ -188,6 +190,10 @@ def _give_up(st: _State, opts: NewtonOptions, it: int) -> NewtonResult | None:
                                     f"{st.watched_steps} along negative curvature of the "
                                     f"watched unknowns (budget {opts.curved_budget})",
                          over_budget=True)
+    if opts.curved_limit and st.watched_steps >= opts.curved_limit:
+        return st.result(False, it, f"no settling: {st.watched_steps} steps along negative "
+                                    f"curvature of the watched unknowns in {it} iterations "
+                                    f"(limit {opts.curved_limit})", stalled=True)
     return None
 
 

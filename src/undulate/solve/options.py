@@ -50,6 +50,10 @@ class NewtonOptions:
     #: of the ``watch`` unknowns has been taken (0: never): the release loop's budget for a
     #: grown step in which the rods' pattern changes (``release.snap_iterations``)
     curved_budget: int = 0
+    #: give up (not converged, ``NewtonResult.stalled``) once this many curved steps along
+    #: the ``watch`` unknowns have been taken (0: never): the release loop's limit for a step
+    #: that can still be halved (``release.stall_curved_steps``)
+    curved_limit: int = 0
     #: give up at once (``NewtonResult.unstable_start``) when the start's Hessian is not
     #: positive definite:
     #: the release loop's rule for a grown step (``release.GROWN_STEP_DEFINITE_START``)
@@ -76,3 +80,6 @@ class NewtonResult:
     over_budget: bool = False
     #: stopped at once by ``opts.definite_start`` (the start's Hessian is not positive definite)
     unstable_start: bool = False
+    #: stopped by ``opts.curved_limit`` (the rods wander from one negative curvature to the
+    #: next without settling)
+    stalled: bool = False

@@ -293,8 +293,8 @@ class _Walk:
     history: list = field(default_factory=list)
     totals: dict = field(default_factory=lambda: dict(
         newton_iterations=0, negative_curvature_steps=0, step_cuts=0, snap_cuts=0,
-        unstable_start_cuts=0, assembly_time_s=0.0, factor_time_s=0.0, eig_time_s=0.0,
-        line_search_time_s=0.0))
+        unstable_start_cuts=0, stall_cuts=0, assembly_time_s=0.0, factor_time_s=0.0,
+        eig_time_s=0.0, line_search_time_s=0.0))
 
     def next_step(self, eps0: float, e_end: float) -> tuple[float, float]:
         if self.steps:
@@ -357,6 +357,7 @@ def _cut(w: _Walk, res, e_old: float, e_new: float, de_min: float, eps0: float,
         w.totals["step_cuts"] += 1
         w.totals["snap_cuts"] += int(res.over_budget)
         w.totals["unstable_start_cuts"] += int(res.unstable_start)
+        w.totals["stall_cuts"] += int(res.stalled)
         w.steps.append((e_old, e_old - w.de))
         return
     n = len(w.history)
@@ -389,8 +390,10 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # old pattern ends, not from wherever a long jump lands; the unstable-start rule
         # only where the step can still be halved
         long_step = rel.adaptive and (e_old - e_new) > rel.snap_resolution * de_nom * (1 + 1e-9)
-        step_opts = opts if not long_step else (
-            snap_opts if (e_old - e_new) / 2 >= de_min else snap_opts_last)
+        halvable = rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new
+        step_opts = opts if not long_step else (snap_opts if halvable else snap_opts_last)
+        if halvable and rel.stall_curved_steps:
+            step_opts = replace(step_opts, curved_limit=rel.stall_curved_steps)
         res = minimize(asm, x_pred, asm.free(x_pred), step_opts,
                        solver=solver, rng=rng, x_ref=w.x, watch=watch)
         w.count(res)
