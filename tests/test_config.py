@@ -21,6 +21,7 @@ def test_defaults_are_spec_defaults():
         ({"release": {"eps0": 0.0}}, "release.eps0", "greater than 0"),
         ({"release": {"eps0": math.nan}}, "release.eps0", "finite"),
         ({"fabric": {"nu": 0.5}}, "fabric.nu", ">= 0, < 0.5"),
+        ({"release": {"stall_curved_steps": -1}}, "release.stall_curved_steps", ">= 0"),
         ({"rods": {"hh": 1.0}}, "rods.hh", "Extra inputs"),
         ({"bogus": 1}, "bogus", "Extra inputs"),
         ({"rods": {"N": 3, "s": 0.0}}, "rods.s", "must be > 0"),

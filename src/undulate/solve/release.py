@@ -349,10 +349,15 @@ def _predict(sim: Simulation, asm: Assembly, bd: Boundary, w: _Walk, e_old: floa
     return x_pred
 
 
-def _cut(w: _Walk, res, e_old: float, e_new: float, de_min: float, eps0: float,
-         adaptive: bool) -> None:
-    """Queue the two halves of a step that did not converge, or raise ConvergenceError."""
-    if adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new:
+def _halvable(rel, e_old: float, e_new: float, de_min: float) -> bool:
+    """Whether the step from ``e_old`` to ``e_new`` may be taken again in halves."""
+    return rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new
+
+
+def _cut(w: _Walk, res, e_old: float, e_new: float, halvable: bool, eps0: float) -> None:
+    """Queue the two halves of a step that did not converge (``halvable``: see
+    :func:`_halvable`), or raise ConvergenceError."""
+    if halvable:
         w.de = (e_old - e_new) / 2
         w.totals["step_cuts"] += 1
         w.totals["snap_cuts"] += int(res.over_budget)
@@ -390,7 +395,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # old pattern ends, not from wherever a long jump lands; the unstable-start rule
         # only where the step can still be halved
         long_step = rel.adaptive and (e_old - e_new) > rel.snap_resolution * de_nom * (1 + 1e-9)
-        halvable = rel.adaptive and (e_old - e_new) / 2 >= de_min and e_old != e_new
+        halvable = _halvable(rel, e_old, e_new, de_min)
         step_opts = opts if not long_step else (snap_opts if halvable else snap_opts_last)
         if halvable and rel.stall_curved_steps:
             step_opts = replace(step_opts, curved_limit=rel.stall_curved_steps)
@@ -401,7 +406,7 @@ def _release_quasistatic(sim: Simulation, asm: Assembly, x: np.ndarray, opts: Ne
         # new equilibrium when it converged
         w.chord_ready = res.converged
         if not res.converged:
-            _cut(w, res, e_old, e_new, de_min, eps0, rel.adaptive)
+            _cut(w, res, e_old, e_new, halvable, eps0)
             continue
         w.x_prev, w.e_prev = w.x, e_old
         w.x, w.e = asm.full(res.u, x_pred), e_new
