@@ -49,20 +49,12 @@ class Case(_Strict):
     def _rules(self) -> Case:
         if "dx_rod" not in self.mesh.model_fields_set:
             dx = min(auto_dx_rod(h, self.release.eps0, b=b, E_B=self.rods.E_B,
-                                 E=self.fabric.E, t=self.fabric.t) for h, b in self._sections())
+                                 E=self.fabric.E, t=self.fabric.t)
+                     for h, b in geometry.rod_sections(self))
             if dx != self.mesh.dx_rod:
                 self.mesh.dx_rod = dx
         check_case(self)
         return self
-
-    def _sections(self) -> list[tuple[float, float]]:
-        """(h, b) of every rod: [rods], or each line and array of the pattern."""
-        r = self.rods
-        if self.pattern is None:
-            return [(r.h, r.b)]
-        items = [*self.pattern.lines, *self.pattern.arrays]
-        return [(it.h if it.h is not None else r.h, it.b if it.b is not None else r.b)
-                for it in items] or [(r.h, r.b)]
 
     # ---- derived geometry (undulate.model.geometry) ------------------------------------
     def rod_paths(self) -> list[PrintedRod]:

@@ -3,7 +3,7 @@ the fabric's extent. Printed (stretched) configuration, mm."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -12,7 +12,22 @@ from .lines import PrintedRod
 if TYPE_CHECKING:
     from .case import Case
 
-__all__ = ["fabric_extent", "rod_paths", "segments"]
+__all__ = ["fabric_extent", "rod_paths", "rod_sections", "segments"]
+
+
+def _section(item: Any, case: Case) -> tuple[float, float]:
+    """(h, b) of one pattern line or array: its own, else the case's [rods] values."""
+    r = case.rods
+    return (item.h if item.h is not None else r.h, item.b if item.b is not None else r.b)
+
+
+def rod_sections(case: Case) -> list[tuple[float, float]]:
+    """(h, b) of every rod: [rods], or each line and array of the pattern (its own values,
+    else [rods]'s). Needs no polylines, so it works before the pattern is checked."""
+    if case.pattern is None:
+        return [(case.rods.h, case.rods.b)]
+    items = [*case.pattern.lines, *case.pattern.arrays]
+    return [_section(it, case) for it in items] or [(case.rods.h, case.rods.b)]
 
 
 def rod_paths(case: Case) -> list[PrintedRod]:
@@ -22,15 +37,10 @@ def rod_paths(case: Case) -> list[PrintedRod]:
     if case.pattern is None:
         return [PrintedRod(str(k), np.array([[x0, y], [x0 + length, y]], dtype=float),
                            r.h, r.b) for k, (x0, y, length) in enumerate(segments(case))]
-    out = []
-    for k, ln in enumerate(case.pattern.lines):
-        out.append(PrintedRod(ln.id or str(k), ln.polyline(case.pattern.resolution),
-                              ln.h if ln.h is not None else r.h,
-                              ln.b if ln.b is not None else r.b))
+    out = [PrintedRod(ln.id or str(k), ln.polyline(case.pattern.resolution),
+                      *_section(ln, case)) for k, ln in enumerate(case.pattern.lines)]
     for j, arr in enumerate(case.pattern.arrays):
-        out.extend(PrintedRod(name, pts, arr.h if arr.h is not None else r.h,
-                              arr.b if arr.b is not None else r.b)
-                   for name, pts in arr.lines(j))
+        out.extend(PrintedRod(name, pts, *_section(arr, case)) for name, pts in arr.lines(j))
     return out
 
 def segments(case: Case) -> list[tuple[float, float, float]]:

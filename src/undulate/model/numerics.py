@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import (
     Field,
     model_validator,
@@ -101,13 +103,23 @@ NODES_PER_HALF_WAVE = 8
 DX_ROD_LADDER = (1.0, 0.5, 1.0 / 3.0, 0.25)
 
 
+def eq1_arc_length(h: ArrayLike, eps0: ArrayLike, *, b: ArrayLike, E_B: ArrayLike,
+                   E: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+    """Eq. (1), the arc length of one circular segment [mm]:
+    l = (24 sqrt(6) E_B I / (E t))^(1/3) eps0^(-1/2) with I = b h^3 / 12. Written once here,
+    below the mesh options that size the rod spacing on it; :func:`undulate.theory.l` is the
+    documented entry point (defaults, scalars back)."""
+    inertia = np.asarray(h, dtype=float) ** 3 * np.asarray(b, dtype=float) / 12.0
+    stiff = 24.0 * math.sqrt(6.0) * np.asarray(E_B, dtype=float) * inertia
+    return (np.cbrt(stiff / (np.asarray(E, dtype=float) * np.asarray(t, dtype=float)))
+            * np.asarray(eps0, dtype=float) ** -0.5)
+
+
 def auto_dx_rod(h: float, eps0: float, *, b: float, E_B: float, E: float, t: float) -> float:
     """The default node spacing along a rod [mm]: the largest of 1, 1/2, 1/3, 1/4 mm that
-    puts at least :data:`NODES_PER_HALF_WAVE` nodes on a half-wave of eq. (1),
-    l = (24 sqrt(6) E_B I / (E t))^(1/3) eps0^(-1/2) with I = b h^3 / 12 (1/4 mm for
-    anything thinner)."""
-    inertia = b * h**3 / 12.0
-    l_half = (24.0 * math.sqrt(6.0) * E_B * inertia / (E * t)) ** (1.0 / 3.0) / math.sqrt(eps0)
+    puts at least :data:`NODES_PER_HALF_WAVE` nodes on a half-wave of eq. (1)
+    (:func:`eq1_arc_length`; 1/4 mm for anything thinner)."""
+    l_half = float(eq1_arc_length(h, eps0, b=b, E_B=E_B, E=E, t=t))
     for dx in DX_ROD_LADDER:
         if l_half >= NODES_PER_HALF_WAVE * dx:
             return dx

@@ -35,7 +35,6 @@ Units: mm, MPa. All functions broadcast over numpy arrays and return floats for 
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -44,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..model.config import MATERIAL_DEFAULTS
 from ..model.families import FAMILIES as ALL_FAMILIES
 from ..model.families import decide_family
+from ..model.numerics import eq1_arc_length
 
 __all__ = [
     "DEFAULTS",
@@ -114,9 +114,7 @@ def l(  # noqa: E743 - the usual name of the arc length
     Assumptions: see the module docstring (inextensible planar rod, identical circular
     segments, zero mean transverse tension, fabric tensioned only under each half-wave).
     """
-    ib = _arr(h) ** 3 * _arr(b) / 12.0
-    return _ret(np.cbrt(24.0 * math.sqrt(6.0) * _arr(E_B) * ib / (_arr(E) * _arr(t)))
-                * _arr(eps0) ** -0.5)
+    return _ret(eq1_arc_length(h, eps0, b=b, E_B=E_B, E=E, t=t))
 
 
 def a(
