@@ -50,6 +50,16 @@ SetupOption = Annotated[
                  + ", ".join(setup_names()) + f") or a TOML file of case tables \\[presets: "
                  f"{REFERENCE}; a SWEEP.toml: none]"),
 ]
+WorkersOption = Annotated[
+    int | None,
+    typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
+]
+RunnerOption = Annotated[
+    str | None, typer.Option("--runner", hidden=True, help="module:function replacing run_case")
+]
+Quick60Option = Annotated[
+    bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")
+]
 
 
 @study_app.command("run")
@@ -57,10 +67,7 @@ def run_cmd(
     target: Annotated[str, typer.Argument(help="preset name or path to a SWEEP.toml")],
     out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
     quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant")] = False,
-    workers: Annotated[
-        int | None,
-        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
-    ] = None,
+    workers: WorkersOption = None,
     dask: Annotated[
         str | None, typer.Option("--dask", help="dask.distributed scheduler address")
     ] = None,
@@ -82,10 +89,7 @@ def run_cmd(
     ] = 1,
     settings: SetOption = None,
     setup_file: SetupOption = None,
-    runner: Annotated[
-        str | None,
-        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
-    ] = None,
+    runner: RunnerOption = None,
 ) -> None:
     """Run (or resume) a study into OUT; finished runs are skipped."""
     try:
@@ -143,19 +147,12 @@ def sentinel_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="study directory")],
     settings: SetOption = None,
     setup_file: SetupOption = None,
-    quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")]
-    = False,
-    workers: Annotated[
-        int | None,
-        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
-    ] = None,
+    quick: Quick60Option = False,
+    workers: WorkersOption = None,
     retry_failed: Annotated[
         bool, typer.Option("--retry-failed", help="run failed runs again")
     ] = False,
-    runner: Annotated[
-        str | None,
-        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
-    ] = None,
+    runner: RunnerOption = None,
 ) -> None:
     """Judge a modelling set-up against the study in minutes: 12 runs (single rods across h,
     five rods in each corner of the (h, s) plane), then per case n, family, onset and
@@ -198,16 +195,9 @@ def transitions_cmd(
     ] = None,
     settings: SetOption = None,
     setup_file: SetupOption = None,
-    quick: Annotated[bool, typer.Option("--quick", help="coarse, cheap variant (L = 60 mm)")]
-    = False,
-    workers: Annotated[
-        int | None,
-        typer.Option("--workers", "-j", min=1, help="local processes \\[default: cpu count]"),
-    ] = None,
-    runner: Annotated[
-        str | None,
-        typer.Option("--runner", hidden=True, help="module:function replacing run_case"),
-    ] = None,
+    quick: Quick60Option = False,
+    workers: WorkersOption = None,
+    runner: RunnerOption = None,
 ) -> None:
     """Locate the transitions n+2 -> n of five parallel rods by bisection in h: h* at each gap
     to +-TOL mm (OUT/table.csv, OUT/transitions.png), rounds of runs in parallel."""
