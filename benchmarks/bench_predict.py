@@ -83,6 +83,7 @@ def main() -> int:
     hits = {"predict_n": 0, "predict_family": 0, "theory_n": 0, "theory_family": 0,
             "predict_n_or_alternative": 0}
     by_confidence: dict[str, list[int]] = {}  # confidence -> [cases, n right, family right]
+    by_band: dict[str, list[int]] = {}  # thin (h < 0.2 mm: many half-waves) or not -> the same
     done = 0
     for r, c in zip(runs, cases, strict=True):
         if r.id not in table.index or table.loc[r.id, "status"] != "ok":
@@ -96,11 +97,13 @@ def main() -> int:
             hits[f"{name}_family"] += int(res["family"] == sim_f)
         alternatives = {a["n"] for a in p.get("alternatives", [])}
         hits["predict_n_or_alternative"] += int(sim_n in alternatives | {p["rods"][0]["n"]})
-        row = by_confidence.setdefault(p["confidence"], [0, 0, 0])
-        row[0] += 1
-        row[1] += int(p["rods"][0]["n"] == sim_n)
-        row[2] += int(p["family"] == sim_f)
         rods = c["rods"]
+        band = "h < 0.2 mm" if rods["h"] < 0.2 else "h >= 0.2 mm"
+        for row in (by_confidence.setdefault(p["confidence"], [0, 0, 0]),
+                    by_band.setdefault(band, [0, 0, 0])):
+            row[0] += 1
+            row[1] += int(p["rods"][0]["n"] == sim_n)
+            row[2] += int(p["family"] == sim_f)
         lines.append(f"| {r.params['case']} | {rods['h']:g} | {rods['L']:g} | "
                      f"{c['release']['eps0']:g} | {rods['N']} | "
                      f"{rods['s']:g} | {sim_f} n = {sim_n} | {p['family']} n = "
@@ -117,7 +120,9 @@ def main() -> int:
               f"predict's n or one of its alternatives: "
               f"{100 * rate['predict_n_or_alternative']:.0f} %",
               "by predict's confidence (cases, n right, family right): "
-              + "; ".join(f"{k} {v[0]}, {v[1]}, {v[2]}" for k, v in by_confidence.items())]
+              + "; ".join(f"{k} {v[0]}, {v[1]}, {v[2]}" for k, v in by_confidence.items()),
+              "by thickness (cases, n right, family right): "
+              + "; ".join(f"{k} {v[0]}, {v[1]}, {v[2]}" for k, v in sorted(by_band.items()))]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.markdown:
