@@ -97,7 +97,8 @@ def test_a_sweep_over_h_and_s_makes_an_atlas_and_others_are_refused(tmp_path: Pa
 def test_a_refined_row_answers_a_design_at_its_thickness() -> None:
     """A diagram refined at the thin end (a row with few gaps between full rows): a design
     is read off the simulated thickness nearest its h, even where another row has its gap;
-    the slack past the ends is half the step at that end."""
+    the slack past the ends is half the step at that end, and at the thin end at most the
+    thickness over which the half-wave length l0 shrinks by 5 %."""
     rows = []
     for h, n in ((0.1, 15), (0.2, 9)):
         rows += [{"h": h, "s": s, "n": n} for s in (0.0, 10.0, 20.0, 30.0, 40.0)]
@@ -110,6 +111,10 @@ def test_a_refined_row_answers_a_design_at_its_thickness() -> None:
     assert atlas.meta["h_step"] == 0.05
     here = locate(atlas, h=0.14, s=28.0, N=5, L=100.0, eps0=0.5)
     assert (here.h, here.s, here.n) == (0.15, 40.0, 13)  # not (0.1, 30): h decides n
-    assert locate(atlas, h=0.08, s=10.0).inside  # within half the end step (0.05) of 0.1
-    assert not locate(atlas, h=0.07, s=10.0).inside
+    # thin end: half the step would be 0.025 mm, but l0 = 1.89 + 41.4 h is 5 % shorter at
+    # h = 0.0927 mm already (n goes as 1 / l0)
+    assert locate(atlas, h=0.095, s=10.0).inside
+    assert not locate(atlas, h=0.09, s=10.0).inside
+    assert locate(atlas, h=0.22, s=10.0).inside  # thick end: half the step, 0.025 mm
+    assert not locate(atlas, h=0.23, s=10.0).inside
     assert locate(atlas, h=0.2, s=44.0).inside and not locate(atlas, h=0.2, s=46.0).inside

@@ -175,6 +175,21 @@ def _bracket(values: pd.Series, v: float) -> list[float]:
     return [float(x) for x in ((lo.max(),) if lo.size else ()) + ((hi.min(),) if hi.size else ())]
 
 
+#: how far below its thinnest rods an atlas still answers, as the relative change of the
+#: half-wave length l0 = c0 + c1 h (:mod:`undulate.design.scaling`): thin rods' n goes as
+#: 1 / l0, so half an h step of a coarse diagram (0.1 -> 0.05 mm: l0 -34 %, n 11 -> ~17)
+#: would read another n
+THIN_END_L0_SLACK = 0.05
+
+
+def _thin_end_slack(h_min: float) -> float:
+    """The h below ``h_min`` over which l0 shrinks by :data:`THIN_END_L0_SLACK`."""
+    from .scaling import load_scaling
+
+    sc = load_scaling()
+    return THIN_END_L0_SLACK * (sc.c0 + sc.c1 * h_min) / sc.c1
+
+
 def _end_slack(values: pd.Series) -> tuple[float, float]:
     """Half the simulated step at each end of an axis (how far past its ends a design still
     counts as inside)."""
@@ -206,6 +221,8 @@ def locate(atlas: Atlas, *, h: float, s: float, **case: float) -> Location:
     p = atlas.points
     for name, v, (lo, hi) in (("h", h, m["h_range"]), ("s", s, m["s_range"])):
         below, above = _end_slack(p[name])
+        if name == "h":
+            below = min(below, _thin_end_slack(lo))
         if v < lo - below or v > hi + above:
             reasons.append(f"{name} = {v:g} mm, simulated {lo:g}..{hi:g} mm")
     hs, ss = m.get("h_step") or 1.0, m.get("s_step") or 1.0
