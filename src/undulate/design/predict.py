@@ -237,14 +237,16 @@ def _lone_rod_answer(case: Any, atlases: list[tuple[str, Atlas]] | None,
     lone = (_simulated(pl, [], 1) if pl.scaled is None
             else _scaled_answer(pl, case, [], 1))
     rod = lone["rods"][0]
-    family = lone["family"] if rod["n"] == 1 else _theory(case)["family"]
+    one_arch = rod["n"] == 1  # bends or rolls, as the lone rod; else coherent or not
+    family = lone["family"] if one_arch else _theory(case)["family"]
     warnings.append(f"outside the simulated groups of rods ({reason}): each rod's n, l, lam, "
                     f"a are those of a lone rod ({lone['summary']}), which rods {r.s:g} mm "
-                    f"apart mostly share; the family {family} is the analytical phase map's")
+                    "apart mostly share" + ("" if one_arch else f"; the family {family} is "
+                                            "the analytical phase map's"))
     return {"source": "simulation", "atlas": pl.name, "family": family,
             "confidence": "lone rods",
             "summary": f"as lone rods: {family} n = {rod['n']} (rods from {lone['summary']})",
-            "alternatives": [a for a in lone["alternatives"]], "warnings": warnings,
+            "alternatives": list(lone["alternatives"]), "warnings": warnings,
             "rods": [{"index": k, **{q: rod[q] for q in ("n", "l", "lam", "a")}}
                      for k in range(n_rods)]}
 
