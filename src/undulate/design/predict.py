@@ -226,8 +226,9 @@ LONE_ROD_GAP = 5.0
 def _lone_rod_answer(case: Any, atlases: list[tuple[str, Atlas]] | None,
                      warnings: list[str], n_rods: int, reason: str) -> dict[str, Any] | None:
     """A group of rods that no several-rod atlas holds, even scaled: each rod's n, l, lam, a
-    from the simulated lone rods of the same h, L and eps0, the family (coherent or
-    independent) from the analytical phase map; None where no lone-rod atlas holds it."""
+    from the simulated lone rods of the same h, L and eps0; the family (coherent or
+    independent) that the nearest group diagram has at its thinnest rods and the carried
+    gap, else the analytical phase map's; None where no lone-rod atlas holds it."""
     r, e0 = case.rods, case.release.eps0
     mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
     best, scaled = place(h=r.h, s=0.0, N=1, L=r.L, eps0=e0, atlases=atlases, **mat)
@@ -237,18 +238,44 @@ def _lone_rod_answer(case: Any, atlases: list[tuple[str, Atlas]] | None,
     lone = (_simulated(pl, [], 1) if pl.scaled is None
             else _scaled_answer(pl, case, [], 1))
     rod = lone["rods"][0]
-    one_arch = rod["n"] == 1  # bends or rolls, as the lone rod; else coherent or not
-    family = lone["family"] if one_arch else _theory(case)["family"]
+    if rod["n"] == 1:  # bends or rolls, as the lone rod
+        family, said = lone["family"], ""
+    else:
+        family, said = _thin_group_family(case, atlases, **mat)
     warnings.append(f"outside the simulated groups of rods ({reason}): each rod's n, l, lam, "
                     f"a are those of a lone rod ({lone['summary']}), which rods {r.s:g} mm "
-                    "apart mostly share" + ("" if one_arch else f"; the family {family} is "
-                                            "the analytical phase map's"))
+                    "apart mostly share" + said)
     return {"source": "simulation", "atlas": pl.name, "family": family,
             "confidence": "lone rods",
             "summary": f"as lone rods: {family} n = {rod['n']} (rods from {lone['summary']})",
             "alternatives": list(lone["alternatives"]), "warnings": warnings,
             "rods": [{"index": k, **{q: rod[q] for q in ("n", "l", "lam", "a")}}
                      for k in range(n_rods)]}
+
+
+def _thin_group_family(case: Any, atlases: list[tuple[str, Atlas]] | None,
+                       **mat: float) -> tuple[str, str]:
+    """(family, what the warning says of it) of a group of rods thinner than every group
+    diagram holds: the family most runs of the thinnest simulated rods (with several
+    half-waves, s > 0) have on the group diagram nearest in (L, eps0) (coherent or
+    independent at these rods scatters from gap to gap); else the analytical phase map's."""
+    r, e0 = case.rods, case.release.eps0
+    near = [(atlas_distance(r.L, e0, a.meta), name, a)
+            for name, a in (_atlases() if atlases is None else atlases)
+            if int(a.meta.get("N", 1)) == r.N and all(
+                k not in a.meta or abs(float(a.meta[k]) - v) <= 0.02 * abs(v)
+                for k, v in mat.items())]
+    for _, name, a in sorted(near, key=lambda t: t[0]):
+        pts = a.points
+        row = pts[np.isclose(pts["h"], pts["h"].min()) & (pts["s"] > 0) & (pts["n"] > 1)]
+        if not row.empty:
+            counts = row["family"].value_counts()
+            fam = str(counts.index[0])
+            return fam, (f"; the family {fam} is what {counts.iloc[0]} of the {len(row)} "
+                         f"groups of the thinnest simulated rods of {name} (h = "
+                         f"{float(pts['h'].min()):g} mm) have")
+    fam = _theory(case)["family"]
+    return fam, f"; the family {fam} is the analytical phase map's"
 
 
 def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, single: bool,
