@@ -218,8 +218,8 @@ def predict_case(case: Any, source: str = "auto",
 
 #: the gap [mm] from which the rods of a group have a lone rod's n: on the simulated five-rod
 #: diagrams (L = 50, 75, 100 mm) rods of h <= 0.3 mm at s >= 5 mm had the n that predict
-#: gives one rod of the same h, L, eps0 in 111 of 146 runs; at s = 2.5 mm they share
-#: fewer, longer waves (docs/design.md, "Groups beyond the diagrams")
+#: gives one rod of the same h, L, eps0 in 100 of 146 runs (most others have two more); at
+#: s = 2.5 mm they share fewer, longer waves (docs/design.md, "Groups beyond the diagrams")
 LONE_ROD_GAP = 5.0
 
 
