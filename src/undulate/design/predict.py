@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import theory as T
 from ..model.families import decide_family
-from .atlas import ATLAS_FILE, Atlas, Location, locate, shipped_atlas
+from .atlas import _REL_TOL, ATLAS_FILE, Atlas, Location, locate, shipped_atlas
 from .scaling import equivalent, load_scaling
 
 __all__ = ["SINGLE_ROD_FILE", "Placement", "atlas_distance", "atlas_named", "place",
@@ -226,9 +226,9 @@ LONE_ROD_GAP = 5.0
 def _lone_rod_answer(case: Any, atlases: list[tuple[str, Atlas]] | None,
                      warnings: list[str], n_rods: int, reason: str) -> dict[str, Any] | None:
     """A group of rods that no several-rod atlas holds, even scaled: each rod's n, l, lam, a
-    from the simulated lone rods of the same h, L and eps0; the family (coherent or
-    independent) that the nearest group diagram has at its thinnest rods and the carried
-    gap, else the analytical phase map's; None where no lone-rod atlas holds it."""
+    from the simulated lone rods of the same h, L and eps0; the family of one arch from them,
+    of several half-waves from :func:`_thin_group_family`; None where no lone-rod atlas
+    holds it."""
     r, e0 = case.rods, case.release.eps0
     mat = {"E_B": r.E_B, "E": case.fabric.E, "t": case.fabric.t, "b": r.b}
     best, scaled = place(h=r.h, s=0.0, N=1, L=r.L, eps0=e0, atlases=atlases, **mat)
@@ -263,17 +263,17 @@ def _thin_group_family(case: Any, atlases: list[tuple[str, Atlas]] | None,
     near = [(atlas_distance(r.L, e0, a.meta), name, a)
             for name, a in (_atlases() if atlases is None else atlases)
             if int(a.meta.get("N", 1)) == r.N and all(
-                k not in a.meta or abs(float(a.meta[k]) - v) <= 0.02 * abs(v)
+                k not in a.meta or abs(float(a.meta[k]) - v) <= _REL_TOL * abs(v)
                 for k, v in mat.items())]
     for _, name, a in sorted(near, key=lambda t: t[0]):
-        pts = a.points
-        row = pts[np.isclose(pts["h"], pts["h"].min()) & (pts["s"] > 0) & (pts["n"] > 1)]
+        pts, h_min = a.points, float(a.points["h"].min())
+        row = pts[np.isclose(pts["h"], h_min) & (pts["s"] > 0) & (pts["n"] > 1)]
         if not row.empty:
             counts = row["family"].value_counts()
             fam = str(counts.index[0])
             return fam, (f"; the family {fam} is what {counts.iloc[0]} of the {len(row)} "
-                         f"groups of the thinnest simulated rods of {name} (h = "
-                         f"{float(pts['h'].min()):g} mm) have")
+                         f"groups of the thinnest simulated rods of {name} (h = {h_min:g} "
+                         "mm) have")
     fam = _theory(case)["family"]
     return fam, f"; the family {fam} is the analytical phase map's"
 
