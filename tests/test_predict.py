@@ -97,7 +97,8 @@ def test_the_atlas_at_the_nearest_rod_length_answers(tmp_path: Path,
     assert direct["source"] == "simulation" and "scaled" not in direct
     assert direct["atlas"] == "phase_diagram_L50"
     near = predict_case(_case(N=5, h=0.3, s=10.0, L=45.0))
-    assert near["confidence"] in ("scaled", "near a transition")
+    # (this made-up L = 50 mm atlas is the L = 100 mm one: its n need not be the fit's)
+    assert near["confidence"] in ("scaled", "near a transition", "fitted")
     assert near["scaled"]["L"] == 50.0
     far = predict_case(_case(N=5, h=0.3, s=10.0, L=90.0))
     assert far["scaled"]["L"] == 100.0
@@ -140,12 +141,16 @@ def test_a_group_beyond_every_diagram_takes_its_n_from_the_lone_rods() -> None:
     most groups of the nearest diagram's thinnest rods have, with a warning; closer rods
     (2.5 mm) are left to theory."""
     from undulate.design.atlas import ATLAS_FILE
+    from undulate.design.waves import WavesFit, load_waves, waves_n
 
     case = case_from_dict({"rods": {"E_B": 1000.0, "N": 5, "L": 145.0, "h": 0.16,
                                     "s": 40.0}, "release": {"eps0": 0.8}})
-    res = predict_case(case)
+    # the many-half-waves fit off (it answers only rods of its width b): the lone-rod rule
+    off = WavesFit(coef=(0.0,) * 5, c0=2.0, c1=40.0, b=1e3, runs=(0, 0), fitted_on=())
+    res = predict_case(case, waves=off)
     lone = predict_case(case_from_dict({"rods": {"E_B": 1000.0, "N": 1, "L": 145.0,
-                                                 "h": 0.16}, "release": {"eps0": 0.8}}))
+                                                 "h": 0.16}, "release": {"eps0": 0.8}}),
+                        waves=off)
     assert res["confidence"] == "lone rods" and res["source"] == "simulation"
     assert [r["n"] for r in res["rods"]] == [lone["rods"][0]["n"]] * 5
     assert res["rods"][0]["l"] == pytest.approx(lone["rods"][0]["l"])
@@ -153,6 +158,9 @@ def test_a_group_beyond_every_diagram_takes_its_n_from_the_lone_rods() -> None:
     thin = pts[(pts["h"] == pts["h"].min()) & (pts["s"] > 0) & (pts["n"] > 1)]
     assert res["family"] == thin["family"].value_counts().index[0]
     assert "lone rod" in res["warnings"][0] and "thinnest simulated rods" in res["warnings"][0]
+    shipped = predict_case(case)  # with the fit: a group's rods, many half-waves
+    assert shipped["rods"][0]["n"] == waves_n(load_waves(), 0.16, 145.0, 0.8, group=True)
+    assert shipped["family"] == res["family"]
     close = case_from_dict({"rods": {"E_B": 1000.0, "N": 5, "L": 145.0, "h": 0.16,
                                      "s": 2.5}, "release": {"eps0": 0.8}})
     assert predict_case(close)["source"] == "theory"

@@ -24,6 +24,7 @@ from .. import theory as T
 from ..model.families import decide_family
 from .atlas import _REL_TOL, ATLAS_FILE, Atlas, Location, locate, shipped_atlas
 from .scaling import equivalent, load_scaling
+from .waves import GROUP_GAP, N_MIN, WavesFit, load_waves, waves_n
 
 __all__ = ["SINGLE_ROD_FILE", "Placement", "atlas_distance", "atlas_named", "place",
            "predict_case", "scaled_location"]
@@ -168,7 +169,8 @@ def arch_rise(length: float, eps0: float) -> float:
 
 
 def predict_case(case: Any, source: str = "auto",
-                 atlases: list[tuple[str, Atlas]] | None = None) -> dict[str, Any]:
+                 atlases: list[tuple[str, Atlas]] | None = None,
+                 waves: WavesFit | None = None) -> dict[str, Any]:
     """Family and per-rod n, l, lam, a of a case (a :class:`undulate.model.Case`).
 
     ``source``: "auto" (simulated data where the case is inside an atlas, or carried there
@@ -176,10 +178,15 @@ def predict_case(case: Any, source: str = "auto",
     theory), "simulation" (the nearest simulated point even outside, with the reason in
     ``warnings``) or "theory" (eq. (1) and the phase map). Returns a JSON-ready dict with
     ``source``, ``family``, ``confidence`` ("simulated", "scaled", "near a transition",
-    "outside" or "theory"), ``summary``, ``warnings`` and ``rods`` (one entry per rod, in
-    the order of a run's metrics.json: by y); a scaled answer also has ``scaled`` (the
-    equivalent h and s on the atlas, the length factor and the exponent). ``atlases``:
-    (name, atlas) pairs to answer from instead of the shipped ones (a cross-check).
+    "fitted", "lone rods", "outside" or "theory"), ``summary``, ``warnings`` and ``rods``
+    (one entry per rod, in the order of a run's metrics.json: by y); a scaled answer also
+    has ``scaled`` (the equivalent h and s on the atlas, the length factor and the
+    exponent). A simulated
+    answer of many half-waves (>= 5, lone rods or groups >= 5 mm apart) takes its n from
+    the fit over all simulated rods (:mod:`undulate.design.waves`) where that differs from
+    the atlas's point: ``confidence`` "fitted". ``atlases``: (name, atlas) pairs to answer
+    from instead of the shipped ones; ``waves``: that fit instead of the shipped one (both
+    for a cross-check).
     """
     if source not in SOURCES:
         raise ValueError(f"source: must be one of {', '.join(SOURCES)} (got {source!r})")
@@ -198,13 +205,13 @@ def predict_case(case: Any, source: str = "auto",
         if not best.loc.inside:
             warnings.append(f"outside the simulated data ({best.loc.reason}): the nearest "
                             "point")
-        return _simulated(best, warnings, n_rods)
+        return _many_waves(_simulated(best, warnings, n_rods), case, waves)
     if scaled is not None:
-        return _scaled_answer(scaled, case, warnings, n_rods)
+        return _many_waves(_scaled_answer(scaled, case, warnings, n_rods), case, waves)
     if source == "auto" and best is not None and r.N > 1 and r.s >= LONE_ROD_GAP:
         lone = _lone_rod_answer(case, atlases, warnings, n_rods, best.loc.reason)
         if lone is not None:
-            return lone
+            return _many_waves(lone, case, waves)
     if best is not None and source == "auto":
         warnings.append(f"outside the simulated data ({best.loc.reason}): eq. (1) and the "
                         "phase map of the analytical model, which do not know the end "
@@ -298,6 +305,32 @@ def scaled_location(atlas: Atlas, h: float, s: float, L: float, eps0: float, sin
         return None
     return loc, {"h": h_eq, "s": None if single else s_eq, "length_factor": k, "p": sc.p,
                  "L": float(m["L"]), "eps0": float(m["eps0"])}
+
+
+def _many_waves(out: dict[str, Any], case: Any, waves: WavesFit | None) -> dict[str, Any]:
+    """A simulated answer of many half-waves with the n of the fit over all simulated rods
+    (:func:`undulate.design.waves.waves_n`) where it differs: each rod's l, lam, a shortened
+    as the waves are more (same arc length), ``confidence`` "fitted", the atlas's point
+    among the alternatives. Unchanged for fewer than :data:`~undulate.design.waves.N_MIN`
+    half-waves, rods closer than 5 mm, and widths the fit did not see."""
+    fit = load_waves() if waves is None else waves
+    r, rod = case.rods, out["rods"][0]
+    group = r.N > 1
+    if (rod["n"] < N_MIN or (group and r.s < GROUP_GAP)
+            or abs(r.b - fit.b) > _REL_TOL * fit.b):
+        return out
+    n = waves_n(fit, r.h, r.L, case.release.eps0, group)
+    if n == rod["n"]:
+        return out
+    k = rod["n"] / n
+    new = {"n": n, "l": rod["l"] * k, "lam": rod["lam"] * k, "a": rod["a"] * k}
+    alts = [a for a in out["alternatives"] if (a["family"], a["n"]) != (out["family"], n)]
+    if all((a["family"], a["n"]) != (out["family"], rod["n"]) for a in alts):
+        alts.insert(0, {"family": out["family"], "n": rod["n"]})
+    return {**out, "confidence": "fitted", "alternatives": alts,
+            "summary": (f"many half-waves: {out['family']} n = {n} from the fit over all "
+                        f"simulated rods with >= {N_MIN} (the atlas: {out['summary']})"),
+            "rods": [{"index": j, **new} for j in range(len(out["rods"]))]}
 
 
 def _simulated(pl: Placement, warnings: list[str], n_rods: int) -> dict[str, Any]:
