@@ -19,6 +19,7 @@ full set (the grid's step is doubled where one is removed), so the rates are pes
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -47,14 +48,19 @@ def _same(meta: dict, L: float, eps0: float) -> bool:
             and abs(float(meta["eps0"]) - eps0) <= _SAME * eps0)
 
 
+@functools.cache
+def _fit_tables(names: tuple[str, ...]) -> tuple[pd.DataFrame, ...]:
+    """The tables the shipped fit was made on, read once."""
+    root = Path(__file__).resolve().parents[3]
+    return tuple(pd.read_csv(root / name) for name in names)
+
+
 def _waves_without(L: float, eps0: float) -> object:
     """The many-half-waves fit (undulate.design.waves) remade on its tables without the runs
     at (L, eps0), so that the held-out atlas's runs do not answer themselves."""
     shipped = load_waves()
-    root = Path(__file__).resolve().parents[3]
     tables = []
-    for name in shipped.fitted_on:
-        t = pd.read_csv(root / name)
+    for t in _fit_tables(shipped.fitted_on):
         here = (abs(t["L"] - L) <= _SAME * L) & (abs(t["eps0"] - eps0) <= _SAME * eps0)
         tables.append(t[~here])
     return fit_waves(tables, shipped.c0, shipped.c1)

@@ -181,12 +181,11 @@ def predict_case(case: Any, source: str = "auto",
     "fitted", "lone rods", "outside" or "theory"), ``summary``, ``warnings`` and ``rods``
     (one entry per rod, in the order of a run's metrics.json: by y); a scaled answer also
     has ``scaled`` (the equivalent h and s on the atlas, the length factor and the
-    exponent). A simulated
-    answer of many half-waves (>= 5, lone rods or groups >= 5 mm apart) takes its n from
-    the fit over all simulated rods (:mod:`undulate.design.waves`) where that differs from
-    the atlas's point: ``confidence`` "fitted". ``atlases``: (name, atlas) pairs to answer
-    from instead of the shipped ones; ``waves``: that fit instead of the shipped one (both
-    for a cross-check).
+    exponent). A simulated answer of many half-waves (>= 5, lone rods or groups >= 5 mm
+    apart) takes its n from the fit over all simulated rods (:mod:`undulate.design.waves`)
+    where that differs from the atlas's point: ``confidence`` "fitted". ``atlases``: (name,
+    atlas) pairs to answer from instead of the shipped ones; ``waves``: that fit instead of
+    the shipped one (both for a cross-check).
     """
     if source not in SOURCES:
         raise ValueError(f"source: must be one of {', '.join(SOURCES)} (got {source!r})")
@@ -227,7 +226,7 @@ def predict_case(case: Any, source: str = "auto",
 #: diagrams (L = 50, 75, 100 mm) rods of h <= 0.3 mm at s >= 5 mm had the n that predict
 #: gives one rod of the same h, L, eps0 in 100 of 146 runs (most others have two more); at
 #: s = 2.5 mm they share fewer, longer waves (docs/design.md, "Groups beyond the diagrams")
-LONE_ROD_GAP = 5.0
+LONE_ROD_GAP = GROUP_GAP  # one threshold: the many-half-waves fit takes groups from it too
 
 
 def _lone_rod_answer(case: Any, atlases: list[tuple[str, Atlas]] | None,
